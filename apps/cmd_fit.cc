@@ -1,0 +1,117 @@
+// ptmkit fit LIGHTS.lp -o OUT.ptm: least-squares polynomial fit of a capture.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "progress.h"
+#include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/light_set.h"
+#include "ptmkit/fit/fit.h"
+#include "ptmkit/texture/ptm.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit::app {
+
+namespace {
+
+struct FitArgs {
+  std::string lights;
+  std::string output;
+  std::string format = "rgb";
+  std::string report;
+  std::string precision = "float";
+  fit::FitOptions options;
+};
+
+void run_fit(const FitArgs& args) {
+  fit::FitOptions options = args.options;
+  options.model = parse_colour_model(args.format);
+  if (args.precision == "double") {
+    options.precision = fit::Precision::kDouble;
+  } else if (args.precision != "float") {
+    throw Error("--precision must be float or double, got '" + args.precision + "'");
+  }
+  const fs::path out_path(args.output);
+  if (out_path.extension() != ".ptm") {
+    throw Error(out_path.string() + ": the output must be a .ptm file");
+  }
+  options.progress = make_progress("fit");
+  const LightSet lights = read_lp(args.lights);
+  texture::PtmStreamWriter writer(out_path);
+  const fit::FitReport report = fit::fit_capture(lights, options, writer);
+  const texture::PtmWriteReport& ptm = writer.report();
+
+  if (!args.report.empty()) {
+    nlohmann::json j = nlohmann::json::parse(report.to_json());
+    j["input"] = fs::absolute(args.lights).lexically_normal().string();
+    j["output"] = fs::absolute(out_path).lexically_normal().string();
+    j["quantisation"] = {{"file_bytes", ptm.file_bytes},
+                         {"max_coeff_error", ptm.max_coeff_error},
+                         {"rms_coeff_error", ptm.rms_coeff_error},
+                         {"relit_mean_abs_grey", ptm.relit_mean_abs_grey},
+                         {"relit_max_abs_grey", ptm.relit_max_abs_grey},
+                         {"relit_psnr_db", std::isfinite(ptm.relit_psnr_db)
+                                               ? nlohmann::json(ptm.relit_psnr_db)
+                                               : nlohmann::json("inf")}};
+    write_file_atomic(args.report, j.dump(2) + "\n");
+  }
+  std::printf(
+      "fit: %d lights, %dx%d, %s, cond(A) %.3g, residual rms %.2f grey (p99 %.2f), %.3f s "
+      "(%.2f Mtexel/s, %d threads)\n",
+      report.lights, report.width, report.height, std::string(to_string(report.model)).c_str(),
+      report.design.condition_number, report.residuals.rms_grey, report.residuals.p99_abs_grey,
+      report.total_seconds, report.texels_per_second() / 1e6, report.threads);
+  std::printf("wrote %s (%zu bytes; quantisation: relit mean %.3f, max %.3f grey levels)\n",
+              out_path.string().c_str(), ptm.file_bytes, ptm.relit_mean_abs_grey,
+              ptm.relit_max_abs_grey);
+}
+
+}  // namespace
+
+void add_fit_command(CLI::App& root) {
+  auto args = std::make_shared<FitArgs>();
+  CLI::App* cmd = root.add_subcommand(
+      "fit",
+      "Fit a polynomial texture map to the photographs listed in a light file (.lp): per texel, "
+      "the least-squares biquadratic in the light direction. Writes a PTM 1.2 file.");
+  cmd->add_option("lights", args->lights, "Light file (.lp); its images are the capture")
+      ->required();
+  cmd->add_option("-o,--output", args->output, "Output .ptm file")->required();
+  cmd->add_option("--format", args->format,
+                  "Colour model: rgb (three polynomials, PTM_FORMAT_RGB), lrgb (luminance "
+                  "polynomial times per-texel colour, PTM_FORMAT_LRGB), ycc (the seed paper: "
+                  "polynomial on Y of YCbCr, constant chroma; written as PTM_FORMAT_RGB)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"rgb", "lrgb", "ycc"}));
+  cmd->add_option("--report", args->report, "Write a JSON fit report here");
+  cmd->add_option("--threads", args->options.threads, "Worker threads (0 = all cores)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--ridge", args->options.design.ridge_lambda,
+                  "Ridge regularisation weight (relative to the number of lights; 0 = plain "
+                  "least squares). Makes single-ring layouts fittable, with a biased fit")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--max-condition", args->options.design.max_condition,
+                  "Refuse light layouts whose design condition number cond(A) exceeds this")
+      ->capture_default_str();
+  cmd->add_option("--band-rows", args->options.band_rows,
+                  "Image rows decoded and fitted at a time (memory ~ 2 x rows x width x "
+                  "channels x lights x 4 bytes)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--precision", args->precision,
+                  "Arithmetic applying the pseudo-inverse: float (fast) or double")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"float", "double"}));
+  cmd->add_flag("!--no-residuals", args->options.residual_stats,
+                "Skip the residual statistics (saves about half the fit arithmetic)");
+  cmd->callback([args] { run_fit(*args); });
+}
+
+}  // namespace ptmkit::app

@@ -1,0 +1,15 @@
+// Subcommands of the ptmkit binary. Each binds its flags to a stage's Options, makes one
+// library call, and prints a short summary. A subcommand's callback throws ptmkit::Error on
+// a user error; main() turns that into a message on stderr and exit code 1.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace ptmkit::app {
+
+void add_synth_command(CLI::App& root);
+void add_fit_command(CLI::App& root);
+void add_relight_command(CLI::App& root);
+void add_info_command(CLI::App& root);
+
+}  // namespace ptmkit::app

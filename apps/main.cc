@@ -1,0 +1,46 @@
+// ptmkit: polynomial texture maps from photographs under known lights.
+#include <cstdio>
+#include <exception>
+
+#include <CLI/CLI.hpp>
+
+#include "commands.h"
+#include "ptmkit/core/error.h"
+
+namespace {
+constexpr const char* kExitCodes =
+    "Exit codes: 0 success; 1 bad input or a failed step (the message names the file and the "
+    "problem; no output file is left behind); 2 bad command line.";
+}
+
+int main(int argc, char** argv) {
+  CLI::App app{"ptmkit: light-dependent textures (polynomial texture maps) from photographs "
+               "under known lights.",
+               "ptmkit"};
+  app.footer(kExitCodes);
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "ptmkit 0.1.0");
+  ptmkit::app::add_synth_command(app);
+  ptmkit::app::add_fit_command(app);
+  ptmkit::app::add_relight_command(app);
+  ptmkit::app::add_info_command(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);
+    return 2;
+  } catch (const ptmkit::Error& e) {
+    std::fprintf(stderr, "ptmkit: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ptmkit: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,13 @@
+# Warnings and sanitizers applied to every ptmkit target through one interface library.
+add_library(ptmkit_build_flags INTERFACE)
+target_compile_options(ptmkit_build_flags INTERFACE
+  -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion
+  -Wnon-virtual-dtor -Wold-style-cast -Woverloaded-virtual)
+if(PTMKIT_NATIVE)
+  target_compile_options(ptmkit_build_flags INTERFACE -march=native)
+endif()
+if(PTMKIT_SANITIZE)
+  target_compile_options(ptmkit_build_flags INTERFACE
+    -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
+  target_link_options(ptmkit_build_flags INTERFACE -fsanitize=address,undefined)
+endif()

@@ -1,0 +1,63 @@
+// Lights of a capture: one per photograph, and the .lp file that lists them.
+//
+// Frame ("light frame"): x to the image's right, y to the image's top, z toward the camera.
+// A distant light is a unit direction toward the light in that frame. A near light (a dome of
+// finite radius) also has a position in millimetres in the sample-plane frame; the fit uses it
+// to give every texel its own direction when the plane geometry is known.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace ptmkit {
+
+struct Light {
+  // The photograph taken under this light. Paths read from an .lp are resolved against the
+  // .lp's folder, so they can be opened from anywhere.
+  std::filesystem::path image;
+  // Unit vector toward the light, light frame. z > 0 (above the sample plane).
+  Eigen::Vector3d direction{0.0, 0.0, 1.0};
+  // Position of a near light in millimetres, light frame, origin at the sample-plane centre.
+  std::optional<Eigen::Vector3d> position_mm;
+  // Relative intensity (1 = nominal); a calibration may estimate it.
+  double intensity = 1.0;
+};
+
+struct LightSet {
+  std::vector<Light> lights;
+  // The file this set was read from (empty if built in memory).
+  std::filesystem::path source;
+
+  [[nodiscard]] std::size_t size() const { return lights.size(); }
+  [[nodiscard]] bool empty() const { return lights.empty(); }
+  [[nodiscard]] std::vector<std::filesystem::path> images() const;
+  [[nodiscard]] std::vector<Eigen::Vector3d> directions() const;
+};
+
+// Reads an .lp file. Accepted: an optional first line with the count (if present it must
+// match the number of entries), entries `name x y z` separated by spaces or tabs, CRLF line
+// ends, blank lines, names relative to the .lp's folder (including ../), non-unit vectors
+// (normalised). Errors, each naming the file and line: a missing or unreadable file, a line
+// that does not parse, NaN or infinite components, a zero vector, a direction with z <= 0,
+// a duplicate image, a count that does not match, no entries.
+[[nodiscard]] LightSet read_lp(const std::filesystem::path& path);
+
+struct LpWriteOptions {
+  bool count_line = true;  // write the count as the first line (most tools expect it)
+  int precision = 9;       // significant digits of each component
+};
+
+// Writes an .lp atomically. Image names are written relative to the .lp's folder.
+void write_lp(const std::filesystem::path& path, const LightSet& lights,
+              const LpWriteOptions& options = {});
+
+// Light direction from elevation above the plane and azimuth (counter-clockwise from +x, in
+// the light frame), both in degrees.
+[[nodiscard]] Eigen::Vector3d direction_from_angles_deg(double elevation_deg, double azimuth_deg);
+[[nodiscard]] double elevation_deg(const Eigen::Vector3d& direction);
+
+}  // namespace ptmkit

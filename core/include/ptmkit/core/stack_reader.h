@@ -1,0 +1,65 @@
+// Streaming reader for a capture stack: N photographs of the same size, read together in
+// bands of rows so that no caller ever needs the whole decoded stack in memory.
+//
+// All N files stay open (one OpenImageIO input each); a band is decoded from the N files in
+// parallel. Band layout: image-major, then row, then pixel, then channel, so that each image's
+// part of the band is one contiguous block, and the band is an N x (rows*width*channels)
+// row-major matrix — which is what a shared-pseudo-inverse fit multiplies.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include "ptmkit/core/image_io.h"
+
+namespace ptmkit {
+
+struct StackBand {
+  int y0 = 0;        // first image row in this band (0 = top)
+  int rows = 0;      // rows in this band
+  int width = 0;
+  int channels = 0;
+  int images = 0;
+  std::vector<float> samples;  // images * rows * width * channels floats
+
+  [[nodiscard]] std::size_t image_stride() const {
+    return static_cast<std::size_t>(rows) * width * channels;
+  }
+  [[nodiscard]] const float* image(int i) const { return samples.data() + i * image_stride(); }
+  [[nodiscard]] float* image(int i) { return samples.data() + i * image_stride(); }
+  [[nodiscard]] float sample(int i, int row, int x, int c) const {
+    return image(i)[(static_cast<std::size_t>(row) * width + x) * channels + c];
+  }
+};
+
+class StackReader {
+ public:
+  // Opens every file and checks that all share width, height and channel count. Throws
+  // ptmkit::Error naming the first file that is missing, unreadable or of another size.
+  explicit StackReader(std::vector<std::filesystem::path> files);
+  ~StackReader();
+  StackReader(const StackReader&) = delete;
+  StackReader& operator=(const StackReader&) = delete;
+
+  [[nodiscard]] int width() const;
+  [[nodiscard]] int height() const;
+  [[nodiscard]] int channels() const;
+  [[nodiscard]] int count() const;
+  [[nodiscard]] const ImageInfo& info() const;  // of the first file; all agree on size
+  [[nodiscard]] const std::vector<std::filesystem::path>& files() const;
+
+  // Decodes the next `rows` rows (fewer at the bottom) of every image into `band`, reusing its
+  // storage. Returns false once every row has been read. Throws ptmkit::Error naming the file
+  // on a decode failure. Rows come top to bottom; the reader cannot seek backwards.
+  bool read_band(int rows, StackBand* band);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Convenience for small stacks (tests, comparisons): every image decoded whole.
+[[nodiscard]] std::vector<Image> read_stack(const std::vector<std::filesystem::path>& files);
+
+}  // namespace ptmkit

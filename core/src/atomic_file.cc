@@ -1,0 +1,73 @@
+#include "ptmkit/core/atomic_file.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <fstream>
+
+#include "ptmkit/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit {
+
+namespace {
+std::atomic<unsigned> g_counter{0};
+}
+
+AtomicOutput::AtomicOutput(fs::path target) : target_(std::move(target)) {
+  if (target_.empty()) throw Error("output path is empty");
+  const fs::path dir = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    throw Error(where(target_) + ": the folder " + dir.string() + " does not exist");
+  }
+  if (fs::is_directory(target_, ec)) {
+    throw Error(where(target_) + ": is a folder, expected a file name");
+  }
+  // Hidden, unique, same folder (so rename is atomic), same extension (so writers that pick
+  // the type from the extension still work).
+  temp_ = dir / ("." + target_.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
+                 std::to_string(g_counter.fetch_add(1)) + target_.extension().string());
+}
+
+AtomicOutput::~AtomicOutput() {
+  if (!committed_) {
+    std::error_code ec;
+    fs::remove(temp_, ec);
+  }
+}
+
+void AtomicOutput::commit() {
+  std::error_code ec;
+  if (!fs::exists(temp_, ec)) {
+    throw Error(where(target_) + ": nothing was written");
+  }
+  fs::rename(temp_, target_, ec);
+  if (ec) {
+    throw Error(where(target_) + ": cannot move the finished file into place: " + ec.message());
+  }
+  committed_ = true;
+}
+
+void write_file_atomic(const fs::path& path, std::string_view contents) {
+  AtomicOutput out(path);
+  {
+    std::ofstream f(out.temp_path(), std::ios::binary | std::ios::trunc);
+    if (!f) throw Error(where(path) + ": cannot open for writing");
+    f.write(contents.data(), static_cast<std::streamsize>(contents.size()));
+    f.flush();
+    if (!f) throw Error(where(path) + ": write failed (disk full?)");
+  }
+  out.commit();
+}
+
+void ensure_directory(const fs::path& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir)) {
+    throw Error(where(dir) + ": cannot create folder" + (ec ? ": " + ec.message() : ""));
+  }
+}
+
+}  // namespace ptmkit

@@ -1,0 +1,130 @@
+#include "ptmkit/core/stack_reader.h"
+
+#include <cmath>
+#include <string>
+
+#include <tbb/parallel_for.h>
+
+#include "internal_oiio.h"
+#include "ptmkit/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit {
+
+namespace {
+
+// Colour channels to read: an alpha channel (RGBA, grey+alpha) is not a sample.
+int colour_channels(const OIIO::ImageSpec& spec) {
+  if (spec.nchannels == 4 || spec.nchannels == 2) return spec.nchannels - 1;
+  return std::min(spec.nchannels, 3);
+}
+
+}  // namespace
+
+struct StackReader::Impl {
+  std::vector<fs::path> files;
+  std::vector<std::unique_ptr<OIIO::ImageInput>> inputs;
+  ImageInfo info;
+  int channels = 0;
+  int next_row = 0;
+};
+
+StackReader::StackReader(std::vector<fs::path> files) : impl_(std::make_unique<Impl>()) {
+  if (files.empty()) throw Error("capture stack is empty: no images to read");
+  impl_->files = std::move(files);
+  impl_->inputs.resize(impl_->files.size());
+  for (std::size_t i = 0; i < impl_->files.size(); ++i) {
+    const fs::path& f = impl_->files[i];
+    impl_->inputs[i] = internal::open_input(f);
+    const auto& spec = impl_->inputs[i]->spec();
+    if (i == 0) {
+      impl_->info = internal::info_from_spec(spec);
+      impl_->channels = colour_channels(spec);
+      continue;
+    }
+    const ImageInfo& first = impl_->info;
+    if (spec.width != first.width || spec.height != first.height) {
+      throw Error(where(f) + ": image is " + std::to_string(spec.width) + "x" +
+                  std::to_string(spec.height) + " but " + impl_->files[0].filename().string() +
+                  " is " + std::to_string(first.width) + "x" + std::to_string(first.height) +
+                  "; every image of a capture must have the same size");
+    }
+    if (colour_channels(spec) != impl_->channels) {
+      throw Error(where(f) + ": image has " + std::to_string(colour_channels(spec)) +
+                  " colour channel(s) but " + impl_->files[0].filename().string() + " has " +
+                  std::to_string(impl_->channels));
+    }
+  }
+}
+
+StackReader::~StackReader() = default;
+
+int StackReader::width() const { return impl_->info.width; }
+int StackReader::height() const { return impl_->info.height; }
+int StackReader::channels() const { return impl_->channels; }
+int StackReader::count() const { return static_cast<int>(impl_->files.size()); }
+const ImageInfo& StackReader::info() const { return impl_->info; }
+const std::vector<fs::path>& StackReader::files() const { return impl_->files; }
+
+bool StackReader::read_band(int rows, StackBand* band) {
+  if (impl_->next_row >= height()) return false;
+  if (rows < 1) rows = 1;
+  const int y0 = impl_->next_row;
+  const int n_rows = std::min(rows, height() - y0);
+  band->y0 = y0;
+  band->rows = n_rows;
+  band->width = width();
+  band->channels = channels();
+  band->images = count();
+  band->samples.resize(band->image_stride() * band->images);
+
+  std::vector<std::string> errors(impl_->inputs.size());
+  tbb::parallel_for(std::size_t{0}, impl_->inputs.size(), [&](std::size_t i) {
+    auto& in = impl_->inputs[i];
+    if (!in->read_scanlines(0, 0, y0, y0 + n_rows, 0, 0, band->channels, OIIO::TypeDesc::FLOAT,
+                            band->image(static_cast<int>(i)))) {
+      errors[i] = internal::oiio_error(in.get());
+    }
+  });
+  // Report the first failing file in stack order, whatever thread saw it first.
+  for (std::size_t i = 0; i < errors.size(); ++i) {
+    if (!errors[i].empty()) {
+      throw Error(where(impl_->files[i]) + ": cannot decode rows " + std::to_string(y0) + ".." +
+                  std::to_string(y0 + n_rows - 1) + ": " + errors[i]);
+    }
+  }
+  // Integer files cannot hold NaN; float files can, and one NaN would poison a whole fit.
+  if (impl_->info.format == PixelFormat::kF32) {
+    for (int i = 0; i < band->images; ++i) {
+      const float* p = band->image(i);
+      for (std::size_t k = 0; k < band->image_stride(); ++k) {
+        if (!std::isfinite(p[k])) {
+          throw Error(where(impl_->files[i]) + ": NaN or infinite sample in row " +
+                      std::to_string(y0 + static_cast<int>(k / (band->width * band->channels))));
+        }
+      }
+    }
+  }
+  impl_->next_row = y0 + n_rows;
+  return true;
+}
+
+std::vector<Image> read_stack(const std::vector<fs::path>& files) {
+  StackReader reader(files);
+  std::vector<Image> images;
+  images.reserve(files.size());
+  for (int i = 0; i < reader.count(); ++i) {
+    images.emplace_back(reader.width(), reader.height(), reader.channels(),
+                        reader.info().colour_space);
+  }
+  StackBand band;
+  while (reader.read_band(64, &band)) {
+    for (int i = 0; i < band.images; ++i) {
+      std::copy_n(band.image(i), band.image_stride(), images[i].row(band.y0));
+    }
+  }
+  return images;
+}
+
+}  // namespace ptmkit

@@ -1,0 +1,403 @@
+#include "ptmkit/fit/fit.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
+
+#include "ptmkit/core/colour.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/stack_reader.h"
+
+namespace ptmkit::fit {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using SampleMap = Eigen::Map<const RowMajorF, 0, Eigen::OuterStride<>>;
+using CoeffMap = Eigen::Map<Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>>;
+
+// Histogram of |residual| in grey levels: 0.05-grey bins up to 256, one overflow bin.
+constexpr double kHistBinGrey = 0.05;
+constexpr int kHistBins = 5121;
+
+struct RowStats {
+  double sum_sq = 0.0;
+  double sum_abs = 0.0;
+  double max_abs = 0.0;
+  std::uint64_t count = 0;
+  std::vector<std::uint32_t> hist;
+  void add(double r_grey) {
+    const double a = std::abs(r_grey);
+    sum_sq += a * a;
+    sum_abs += a;
+    max_abs = std::max(max_abs, a);
+    ++count;
+    const auto bin = static_cast<int>(std::min(a / kHistBinGrey, double(kHistBins - 1)));
+    ++hist[static_cast<std::size_t>(bin)];
+  }
+};
+
+struct StatsTotal {
+  double sum_sq = 0.0, sum_abs = 0.0, max_abs = 0.0;
+  std::uint64_t count = 0;
+  std::vector<std::uint64_t> hist = std::vector<std::uint64_t>(kHistBins, 0);
+  void merge(const RowStats& r) {
+    sum_sq += r.sum_sq;
+    sum_abs += r.sum_abs;
+    max_abs = std::max(max_abs, r.max_abs);
+    count += r.count;
+    for (int i = 0; i < kHistBins; ++i) hist[i] += r.hist[i];
+  }
+  ResidualStats finish() const {
+    ResidualStats s;
+    s.samples = count;
+    if (count == 0) return s;
+    s.rms_grey = std::sqrt(sum_sq / static_cast<double>(count));
+    s.mean_abs_grey = sum_abs / static_cast<double>(count);
+    s.max_abs_grey = max_abs;
+    const auto target = static_cast<std::uint64_t>(std::ceil(0.99 * static_cast<double>(count)));
+    std::uint64_t acc = 0;
+    for (int i = 0; i < kHistBins; ++i) {
+      acc += hist[i];
+      if (acc >= target) {
+        s.p99_abs_grey = (i + 1) * kHistBinGrey;
+        break;
+      }
+    }
+    return s;
+  }
+};
+
+// Fits one band. Output buffers: coeffs [texel][poly][term], colour [texel][colours].
+class BandFitter {
+ public:
+  BandFitter(const LightDesign& design, const FitOptions& options, int width, int channels)
+      : design_(design), options_(options), width_(width), channels_(channels) {
+    a_f_ = design.design().cast<float>();
+  }
+
+  void fit(const StackBand& band, std::vector<float>* coeffs, std::vector<float>* colour,
+           std::vector<RowStats>* stats) const {
+    const int polys = polynomial_count(options_.model);
+    const int ncol = colour_count(options_.model);
+    coeffs->assign(static_cast<std::size_t>(band.rows) * width_ * polys * kPtmTerms, 0.0f);
+    colour->assign(static_cast<std::size_t>(band.rows) * width_ * ncol, 0.0f);
+    stats->assign(static_cast<std::size_t>(band.rows), RowStats{});
+    tbb::parallel_for(0, band.rows, [&](int r) {
+      RowStats& st = (*stats)[static_cast<std::size_t>(r)];
+      if (options_.residual_stats) st.hist.assign(kHistBins, 0);
+      float* c_out = coeffs->data() + static_cast<std::size_t>(r) * width_ * polys * kPtmTerms;
+      float* col_out = colour->data() + static_cast<std::size_t>(r) * width_ * ncol;
+      fit_row(band, r, c_out, col_out, &st);
+    });
+  }
+
+ private:
+  // P (6 x N) times a sample matrix (N x M) into a 6 x M column-major output.
+  template <class Samples>
+  void apply(const Samples& s, float* out, Eigen::Index m) const {
+    CoeffMap c(out, kPtmTerms, m);
+    if (options_.precision == Precision::kDouble) {
+      c = (design_.pseudo_inverse() * s.template cast<double>()).template cast<float>();
+    } else {
+      c.noalias() = design_.pseudo_inverse_f() * s;
+    }
+  }
+
+  void fit_row(const StackBand& band, int r, float* c_out, float* col_out, RowStats* st) const {
+    const int n = band.images;
+    const int w = width_;
+    const int ch = channels_;
+    const auto stride = static_cast<Eigen::Index>(band.image_stride());
+    const float* first = band.image(0) + static_cast<std::size_t>(r) * w * ch;
+    const SampleMap samples(first, n, static_cast<Eigen::Index>(w) * ch, Eigen::OuterStride<>(stride));
+
+    if (options_.model == ColourModel::kRGB) {
+      if (ch == 3) {
+        apply(samples, c_out, static_cast<Eigen::Index>(w) * 3);
+      } else {  // grey input: the same polynomial for R, G and B
+        std::vector<float> grey(static_cast<std::size_t>(w) * kPtmTerms);
+        apply(samples, grey.data(), w);
+        for (int x = 0; x < w; ++x) {
+          for (int c = 0; c < 3; ++c) {
+            std::copy_n(grey.data() + x * kPtmTerms, kPtmTerms, c_out + (x * 3 + c) * kPtmTerms);
+          }
+        }
+      }
+      if (options_.residual_stats) {
+        // Model values for every (light, texel, channel) at once: A (N x 6) times coeffs.
+        const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(
+            c_out, kPtmTerms, static_cast<Eigen::Index>(w) * 3);
+        const RowMajorF model = a_f_ * c;  // N x 3W
+        for (int i = 0; i < n; ++i) {
+          for (int x = 0; x < w; ++x) {
+            for (int k = 0; k < ch; ++k) {
+              st->add(255.0 * (samples(i, x * ch + k) - model(i, x * 3 + k)));
+            }
+          }
+        }
+      }
+      return;
+    }
+
+    // Luminance models: fit Y, then a per-texel colour.
+    RowMajorF y(n, w);
+    for (int i = 0; i < n; ++i) {
+      for (int x = 0; x < w; ++x) {
+        y(i, x) = ch == 3 ? static_cast<float>(luma(samples(i, 3 * x), samples(i, 3 * x + 1),
+                                                    samples(i, 3 * x + 2)))
+                          : samples(i, x);
+      }
+    }
+    apply(y, c_out, w);
+    for (int x = 0; x < w; ++x) {
+      float* coef = c_out + x * kPtmTerms;
+      float* col = col_out + x * colour_count(options_.model);
+      if (options_.model == ColourModel::kLRGB) {
+        // Least-squares colour k_c minimising sum_i (rgb_i - k_c Y_i)^2, then scaled so the
+        // largest channel is 1 and the polynomial carries the rest.
+        double yy = 0.0;
+        double yc[3] = {0.0, 0.0, 0.0};
+        for (int i = 0; i < n; ++i) {
+          const double yi = y(i, x);
+          yy += yi * yi;
+          for (int c = 0; c < 3; ++c) yc[c] += yi * samples(i, ch == 3 ? 3 * x + c : x);
+        }
+        double k[3] = {1.0, 1.0, 1.0};
+        if (yy > 1e-20) {
+          for (int c = 0; c < 3; ++c) k[c] = std::max(0.0, yc[c] / yy);
+        }
+        double m = std::max({k[0], k[1], k[2]});
+        if (m <= 1e-12) {
+          k[0] = k[1] = k[2] = 1.0;
+          m = 1.0;
+        }
+        for (int c = 0; c < 3; ++c) col[c] = static_cast<float>(k[c] / m);
+        for (int t = 0; t < kPtmTerms; ++t) coef[t] = static_cast<float>(coef[t] * m);
+      } else {
+        // The seed paper's constant chromaticity: luminance-weighted mean Cb and Cr.
+        double sy = 0.0, scb = 0.0, scr = 0.0;
+        if (ch == 3) {
+          for (int i = 0; i < n; ++i) {
+            const auto ycc = to_ycbcr(samples(i, 3 * x), samples(i, 3 * x + 1), samples(i, 3 * x + 2));
+            const double wgt = std::max(0.0, ycc.y);
+            sy += wgt;
+            scb += wgt * ycc.cb;
+            scr += wgt * ycc.cr;
+          }
+        }
+        col[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
+        col[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
+      }
+    }
+    if (options_.residual_stats) {
+      const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(c_out, kPtmTerms, w);
+      const RowMajorF model = a_f_ * c;  // N x W: L (LRGB, scaled) or Y (YCC)
+      const int ncol = colour_count(options_.model);
+      for (int i = 0; i < n; ++i) {
+        for (int x = 0; x < w; ++x) {
+          const float* col = col_out + x * ncol;
+          double rgb[3];
+          if (options_.model == ColourModel::kLRGB) {
+            for (int k = 0; k < 3; ++k) rgb[k] = model(i, x) * col[k];
+          } else {
+            from_ycbcr({model(i, x), col[0], col[1]}, &rgb[0], &rgb[1], &rgb[2]);
+          }
+          if (ch == 3) {
+            for (int k = 0; k < 3; ++k) st->add(255.0 * (samples(i, 3 * x + k) - rgb[k]));
+          } else {
+            st->add(255.0 * (samples(i, x) - rgb[0]));
+          }
+        }
+      }
+    }
+  }
+
+  const LightDesign& design_;
+  const FitOptions& options_;
+  int width_;
+  int channels_;
+  Eigen::MatrixXf a_f_;
+};
+
+using BandSource = std::function<bool(int rows, StackBand* band)>;
+
+FitReport run_fit(const LightDesign& design, const FitOptions& options, int width, int height,
+                  int channels, ColourSpace colour_space, const BandSource& next_band,
+                  CoefficientSink& sink) {
+  const auto t0 = Clock::now();
+  FitReport report;
+  report.lights = design.lights();
+  report.width = width;
+  report.height = height;
+  report.channels = channels;
+  report.model = options.model;
+  report.colour_space = colour_space;
+  report.design = design.report();
+  report.threads = options.threads > 0 ? options.threads
+                                       : tbb::this_task_arena::max_concurrency();
+
+  BandFitter fitter(design, options, width, channels);
+  StatsTotal totals;
+  StackBand bands[2];
+  std::vector<float> coeffs, colour;
+  std::vector<RowStats> row_stats;
+  sink.begin(width, height, options.model, colour_space);
+
+  auto td = Clock::now();
+  bool have = next_band(options.band_rows, &bands[0]);
+  report.decode_seconds += seconds_since(td);
+  int cur = 0;
+  while (have) {
+    // Decode the next band while this one is fitted.
+    bool have_next = false;
+    double decode_s = 0.0;
+    tbb::task_group group;
+    group.run([&] {
+      const auto t = Clock::now();
+      have_next = next_band(options.band_rows, &bands[1 - cur]);
+      decode_s = seconds_since(t);
+    });
+    const auto tf = Clock::now();
+    try {
+      fitter.fit(bands[cur], &coeffs, &colour, &row_stats);
+    } catch (...) {
+      group.wait();
+      throw;
+    }
+    report.fit_seconds += seconds_since(tf);
+    group.wait();  // rethrows a decode error
+    report.decode_seconds += decode_s;
+    for (const auto& rs : row_stats) {
+      if (options.residual_stats) totals.merge(rs);
+    }
+    sink.write_rows(bands[cur].y0, bands[cur].rows, coeffs.data(), colour.data());
+    if (options.progress) {
+      options.progress(static_cast<double>(bands[cur].y0 + bands[cur].rows) / height);
+    }
+    cur = 1 - cur;
+    have = have_next;
+  }
+  sink.end();
+  report.residuals = totals.finish();
+  report.total_seconds = seconds_since(t0);
+  return report;
+}
+
+}  // namespace
+
+std::string FitOptions::validate() const {
+  if (band_rows < 1) return "band_rows must be at least 1";
+  if (threads < 0) return "threads must be >= 0 (0 = all cores)";
+  if (!(design.max_condition > 1.0)) return "max_condition must be > 1";
+  if (!(design.ridge_lambda >= 0.0) || !std::isfinite(design.ridge_lambda)) {
+    return "ridge lambda must be a finite number >= 0";
+  }
+  return {};
+}
+
+FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+  const ThreadLimit limit(options.threads);
+  // Check the layout before opening a single image: a bad layout fails fast.
+  const LightDesign design = LightDesign::build(lights.directions(), options.design);
+  StackReader reader(lights.images());
+  const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
+  return run_fit(design, options, reader.width(), reader.height(), reader.channels(),
+                 reader.info().colour_space, source, sink);
+}
+
+FitReport fit_images(const std::vector<Image>& images,
+                     const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
+                     CoefficientSink& sink) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+  if (images.size() != light_dirs.size()) {
+    throw Error("fit: " + std::to_string(images.size()) + " images but " +
+                std::to_string(light_dirs.size()) + " light directions");
+  }
+  if (images.empty()) throw Error("fit: no images");
+  const ThreadLimit limit(options.threads);
+  const LightDesign design = LightDesign::build(light_dirs, options.design);
+  const int w = images[0].width();
+  const int h = images[0].height();
+  const int src_ch = images[0].channels();
+  const int ch = (src_ch == 4 || src_ch == 2) ? src_ch - 1 : std::min(src_ch, 3);
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    if (images[i].width() != w || images[i].height() != h || images[i].channels() != src_ch) {
+      throw Error("fit: image " + std::to_string(i) + " differs in size or channels from image 0");
+    }
+  }
+  int next_row = 0;
+  const auto source = [&](int rows, StackBand* band) {
+    if (next_row >= h) return false;
+    band->y0 = next_row;
+    band->rows = std::min(rows, h - next_row);
+    band->width = w;
+    band->channels = ch;
+    band->images = static_cast<int>(images.size());
+    band->samples.resize(band->image_stride() * images.size());
+    for (std::size_t i = 0; i < images.size(); ++i) {
+      float* dst = band->image(static_cast<int>(i));
+      for (int r = 0; r < band->rows; ++r) {
+        const float* src = images[i].row(band->y0 + r);
+        for (int x = 0; x < w; ++x) {
+          for (int c = 0; c < ch; ++c) *dst++ = src[x * src_ch + c];
+          for (int c = 0; c < ch; ++c) {
+            if (!std::isfinite(dst[c - ch])) {
+              throw Error("fit: image " + std::to_string(i) + " has a NaN or infinite sample");
+            }
+          }
+        }
+      }
+    }
+    next_row += band->rows;
+    return true;
+  };
+  return run_fit(design, options, w, h, ch, images[0].colour_space(), source, sink);
+}
+
+std::string FitReport::to_json() const {
+  nlohmann::json j;
+  j["lights"] = lights;
+  j["width"] = width;
+  j["height"] = height;
+  j["channels"] = channels;
+  j["model"] = std::string(to_string(model));
+  j["colour_space"] = std::string(to_string(colour_space));
+  auto num = [](double v) -> nlohmann::json {
+    if (std::isfinite(v)) return v;
+    return "inf";
+  };
+  j["design"] = {{"condition_number", num(design.condition_number)},
+                 {"smallest_singular_value", design.smallest_singular},
+                 {"largest_singular_value", design.largest_singular},
+                 {"min_elevation_deg", design.min_elevation_deg},
+                 {"max_elevation_deg", design.max_elevation_deg},
+                 {"single_ring", design.single_ring},
+                 {"regularised", design.regularised}};
+  j["residuals_grey"] = {{"rms", residuals.rms_grey},
+                         {"mean_abs", residuals.mean_abs_grey},
+                         {"p99_abs", residuals.p99_abs_grey},
+                         {"max_abs", residuals.max_abs_grey},
+                         {"samples", residuals.samples}};
+  j["threads"] = threads;
+  j["timings_s"] = {{"decode", decode_seconds},
+                    {"fit", fit_seconds},
+                    {"total", total_seconds},
+                    {"texels_per_second", texels_per_second()}};
+  return j.dump(2);
+}
+
+}  // namespace ptmkit::fit

@@ -1,0 +1,259 @@
+#include "ptmkit/fit/fit.h"
+
+#include <cstring>
+#include <random>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "ptmkit/calib/dome.h"
+#include "ptmkit/core/colour.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/light_layout.h"
+#include "test_util.h"
+
+using ::testing::HasSubstr;
+
+namespace ptmkit::fit {
+namespace {
+
+std::vector<Eigen::Vector3d> dome49() { return calib::layout_directions("dome49"); }
+
+// Per-texel random polynomials whose values stay inside (0, 1) over the upper hemisphere:
+// a5 around 0.5 and the other terms small (|sum| <= 0.4 for lu^2 + lv^2 <= 1).
+CoefficientMap random_world(int w, int h, std::uint64_t seed) {
+  CoefficientMap map(w, h, ColourModel::kRGB, ColourSpace::kLinear);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> small(-0.08f, 0.08f);
+  std::uniform_real_distribution<float> base(0.4f, 0.6f);
+  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
+    map.coeffs[i] = (i % kPtmTerms == 5) ? base(rng) : small(rng);
+  }
+  return map;
+}
+
+std::vector<Image> render_world(const CoefficientMap& map,
+                                const std::vector<Eigen::Vector3d>& dirs) {
+  std::vector<Image> images;
+  for (const auto& d : dirs) {
+    Image img(map.width, map.height, 3, map.colour_space);
+    for (int y = 0; y < map.height; ++y)
+      for (int x = 0; x < map.width; ++x) map.evaluate(x, y, d.x(), d.y(), &img.at(x, y, 0));
+    images.push_back(std::move(img));
+  }
+  return images;
+}
+
+// Largest absolute row sum of the pseudo-inverse: how much an error in the samples can move a
+// coefficient (infinity-norm amplification).
+double pinv_gain(const LightDesign& design) {
+  return design.pseudo_inverse().cwiseAbs().rowwise().sum().maxCoeff();
+}
+
+TEST(LightDesign, RecoversAnExactPolynomialToDoublePrecision) {
+  std::mt19937_64 rng(test::test_seed());
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const auto& dirs : {dome49(), geodesic_dome(2), ring_layout(parse_rings("5:8,45:8,85:4"))}) {
+    const LightDesign design = LightDesign::build(dirs);
+    for (int trial = 0; trial < 100; ++trial) {
+      double truth[6];
+      for (double& t : truth) t = u(rng);
+      std::vector<double> samples;
+      for (const auto& d : dirs) {
+        const auto b = ptm_basis(d.x(), d.y());
+        double v = 0.0;
+        for (int k = 0; k < 6; ++k) v += truth[k] * b[k];
+        samples.push_back(v);
+      }
+      double got[6];
+      design.solve(samples.data(), got);
+      for (int k = 0; k < 6; ++k) ASSERT_NEAR(got[k], truth[k], 1e-9) << "term " << k;
+    }
+  }
+}
+
+TEST(FitImages, RecoversThePolynomialWorldWithinFloatInputPrecision) {
+  const auto dirs = dome49();
+  const CoefficientMap truth = random_world(24, 16, test::test_seed());
+  const auto images = render_world(truth, dirs);
+  const LightDesign design = LightDesign::build(dirs);
+  for (Precision precision : {Precision::kDouble, Precision::kFloat}) {
+    CoefficientMap got;
+    CoefficientMapSink sink(&got);
+    FitOptions options;
+    options.precision = precision;
+    const FitReport report = fit_images(images, dirs, options, sink);
+    // Samples are floats (relative rounding 2^-24 of values below 1) and so is the stored
+    // result; the float path also rounds the pseudo-inverse and the products.
+    const double eps = std::ldexp(1.0, -24);
+    const double tol = pinv_gain(design) * eps * (precision == Precision::kFloat ? 8.0 : 1.0) +
+                       2.0 * eps;
+    ASSERT_EQ(got.coeffs.size(), truth.coeffs.size());
+    for (std::size_t i = 0; i < got.coeffs.size(); ++i) {
+      ASSERT_NEAR(got.coeffs[i], truth.coeffs[i], tol) << "index " << i;
+    }
+    EXPECT_LT(report.residuals.rms_grey, 255.0 * 8 * eps);
+    EXPECT_EQ(report.lights, 49);
+    EXPECT_NEAR(report.design.condition_number, 5.3, 0.2);  // field notes: 49-light dome 5.3
+  }
+}
+
+TEST(FitImages, ResultsDoNotDependOnThreadsOrBandSize) {
+  const auto dirs = dome49();
+  auto images = render_world(random_world(37, 29, test::test_seed()), dirs);
+  std::mt19937_64 rng(test::test_seed());
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  for (auto& img : images)
+    for (std::size_t i = 0; i < img.size(); ++i) img.data()[i] += noise(rng);
+  std::vector<CoefficientMap> maps;
+  std::vector<FitReport> reports;
+  for (auto [threads, band] : {std::pair{1, 16}, std::pair{2, 3}, std::pair{2, 64}}) {
+    for (ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB, ColourModel::kYCC}) {
+      CoefficientMap got;
+      CoefficientMapSink sink(&got);
+      FitOptions options;
+      options.threads = threads;
+      options.band_rows = band;
+      options.model = model;
+      reports.push_back(fit_images(images, dirs, options, sink));
+      maps.push_back(std::move(got));
+    }
+  }
+  for (std::size_t i = 3; i < maps.size(); ++i) {
+    const auto& a = maps[i % 3];
+    const auto& b = maps[i];
+    ASSERT_EQ(a.coeffs.size(), b.coeffs.size());
+    EXPECT_EQ(std::memcmp(a.coeffs.data(), b.coeffs.data(), a.coeffs.size() * 4), 0);
+    EXPECT_EQ(std::memcmp(a.colour.data(), b.colour.data(), a.colour.size() * 4), 0);
+    EXPECT_EQ(reports[i % 3].residuals.rms_grey, reports[i].residuals.rms_grey);
+    EXPECT_EQ(reports[i % 3].residuals.p99_abs_grey, reports[i].residuals.p99_abs_grey);
+  }
+  // Noise of sigma 0.01 (2.55 grey) leaves residuals of sigma * sqrt((N - 6) / N) in RGB.
+  EXPECT_NEAR(reports[0].residuals.rms_grey, 2.55 * std::sqrt(43.0 / 49.0), 0.1);
+}
+
+TEST(FitImages, LuminanceModelsReproduceAConstantChromaTexture) {
+  // Every texel is Y(l) times a fixed colour: LRGB reproduces it exactly; for YCC, a grey
+  // texel (Cb = Cr = 0) is exact.
+  const auto dirs = dome49();
+  CoefficientMap lum = random_world(8, 8, test::test_seed());
+  std::vector<Image> images;
+  const float colour[3] = {0.9f, 0.5f, 0.2f};
+  for (const auto& d : dirs) {
+    Image img(8, 8, 3);
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 8; ++x) {
+        float rgb[3];
+        lum.evaluate(x, y, d.x(), d.y(), rgb);
+        const float grey = x < 4 ? 1.0f : 0.0f;  // left half grey, right half coloured
+        for (int c = 0; c < 3; ++c) img.at(x, y, c) = rgb[0] * (grey + (1 - grey) * colour[c]);
+      }
+    images.push_back(std::move(img));
+  }
+  CoefficientMap lrgb;
+  CoefficientMapSink lrgb_sink(&lrgb);
+  FitOptions options;
+  options.model = ColourModel::kLRGB;
+  const FitReport rl = fit_images(images, dirs, options, lrgb_sink);
+  EXPECT_LT(rl.residuals.max_abs_grey, 1e-3);
+  EXPECT_NEAR(lrgb.texel_colour(6, 3)[0], 1.0f, 1e-6);
+  EXPECT_NEAR(lrgb.texel_colour(6, 3)[2], colour[2] / colour[0], 1e-5);
+
+  CoefficientMap ycc;
+  CoefficientMapSink ycc_sink(&ycc);
+  options.model = ColourModel::kYCC;
+  (void)fit_images(images, dirs, options, ycc_sink);
+  for (int x = 0; x < 4; ++x) {
+    EXPECT_NEAR(ycc.texel_colour(x, 2)[0], 0.0f, 1e-6);
+    float got[3], want[3];
+    ycc.evaluate(x, 2, 0.3, 0.4, got);
+    lum.evaluate(x, 2, 0.3, 0.4, want);
+    EXPECT_NEAR(got[1], want[0], 1e-5);
+  }
+}
+
+TEST(LightDesign, RefusesLayoutsThatCannotBeFittedAndSaysWhy) {
+  auto expect_problem = [](const std::vector<Eigen::Vector3d>& dirs, const std::string& what) {
+    try {
+      (void)LightDesign::build(dirs);
+      FAIL() << "expected a refusal mentioning: " << what;
+    } catch (const Error& e) {
+      EXPECT_THAT(e.what(), HasSubstr(what));
+    }
+  };
+  expect_problem(ring_layout(parse_rings("30:3,60:2")), "at least 6 lights");
+  expect_problem(ring_layout(parse_rings("30:12")), "same elevation");
+  expect_problem(ring_layout(parse_rings("30:12")), "--ridge");
+  // Ridge makes the single ring solvable, and the report says it was regularised.
+  DesignOptions ridge;
+  ridge.ridge_lambda = 1e-3;
+  const LightDesign d = LightDesign::build(ring_layout(parse_rings("30:12")), ridge);
+  EXPECT_TRUE(d.report().regularised);
+  EXPECT_TRUE(d.report().single_ring);
+  EXPECT_GT(d.report().condition_number, 1e12);
+  // A tiny condition limit refuses even a good dome.
+  DesignOptions strict;
+  strict.max_condition = 2.0;
+  try {
+    (void)LightDesign::build(dome49(), strict);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("badly conditioned"));
+  }
+}
+
+TEST(LightDesign, ExactlySixLightsInterpolate) {
+  const std::vector<Eigen::Vector3d> dirs = {
+      direction_from_angles_deg(90, 0),  direction_from_angles_deg(30, 0),
+      direction_from_angles_deg(30, 90), direction_from_angles_deg(30, 200),
+      direction_from_angles_deg(60, 45), direction_from_angles_deg(60, 250)};
+  const LightDesign design = LightDesign::build(dirs);
+  const double samples[6] = {0.1, 0.7, 0.3, 0.9, 0.2, 0.5};
+  double c[6];
+  design.solve(samples, c);
+  for (std::size_t i = 0; i < dirs.size(); ++i) {
+    const auto b = ptm_basis(dirs[i].x(), dirs[i].y());
+    double v = 0;
+    for (int k = 0; k < 6; ++k) v += c[k] * b[k];
+    EXPECT_NEAR(v, samples[i], 1e-10);
+  }
+}
+
+TEST(FitImages, RejectsNaNAndMismatchedInput) {
+  const auto dirs = dome49();
+  auto images = render_world(random_world(4, 4, 1), dirs);
+  CoefficientMap got;
+  CoefficientMapSink sink(&got);
+  auto short_dirs = dirs;
+  short_dirs.pop_back();
+  EXPECT_THROW((void)fit_images(images, short_dirs, {}, sink), Error);
+  images[7].at(2, 3, 1) = std::nanf("");
+  try {
+    (void)fit_images(images, dirs, {}, sink);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("NaN"));
+  }
+}
+
+TEST(FitImages, GreyInputGivesThreeEqualPolynomials) {
+  const auto dirs = dome49();
+  const auto rgb_images = render_world(random_world(6, 5, 3), dirs);
+  std::vector<Image> grey;
+  for (const auto& img : rgb_images) {
+    Image g(6, 5, 1);
+    for (int y = 0; y < 5; ++y)
+      for (int x = 0; x < 6; ++x) g.at(x, y, 0) = img.at(x, y, 1);
+    grey.push_back(std::move(g));
+  }
+  CoefficientMap got;
+  CoefficientMapSink sink(&got);
+  (void)fit_images(grey, dirs, {}, sink);
+  for (int k = 0; k < 6; ++k) {
+    EXPECT_EQ(got.texel_coeffs(2, 2)[k], got.texel_coeffs(2, 2)[6 + k]);
+    EXPECT_EQ(got.texel_coeffs(2, 2)[k], got.texel_coeffs(2, 2)[12 + k]);
+  }
+}
+
+}  // namespace
+}  // namespace ptmkit::fit
