@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Configures and builds ptmkit. Usage: scripts/build.sh [--sanitize] [BUILD_DIR]
+# Default build dir: build/release (build/asan with --sanitize).
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+sanitize=OFF
+build=""
+for a in "$@"; do
+  case "$a" in
+    --sanitize) sanitize=ON ;;
+    *) build="$a" ;;
+  esac
+done
+if [ -z "$build" ]; then
+  if [ "$sanitize" = ON ]; then build="$root/build/asan"; else build="$root/build/release"; fi
+fi
+bash "$root/scripts/install-deps.sh"
+btype=Release
+[ "$sanitize" = ON ] && btype=RelWithDebInfo
+bench=ON
+[ "$sanitize" = ON ] && bench=OFF
+# Build output goes to stderr: stdout's last line is the build folder, for the callers.
+cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE="$btype" -DPTMKIT_SANITIZE="$sanitize" \
+  -DPTMKIT_BUILD_BENCH="$bench" >&2
+cmake --build "$build" -j "$(nproc)" >&2
+echo "$build"
