@@ -1,0 +1,76 @@
+// Fits of real third-party captures from ../shared/data (skipped where absent).
+#include <gtest/gtest.h>
+
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/core/light_set.h"
+#include "ptmkit/fit/fit.h"
+#include "ptmkit/texture/metrics.h"
+#include "ptmkit/texture/ptm.h"
+#include "ptmkit/texture/relight.h"
+#include "test_util.h"
+
+namespace ptmkit {
+namespace {
+
+// SynthRTI Multi/Object2/material5: 49 training lights, 20 test lights at other elevations.
+// Plain least squares, three polynomials, stored as an 8-bit .ptm, relit at the test lights:
+// the field notes give about 20.2 dB for this set; the issue asks for at least 20.0.
+TEST(RealData, SynthRtiRgbFitRelightsHeldOutLightsAbove20dB) {
+  const auto root = test::shared_data("synthrti-multi2-mat5");
+  if (!root) GTEST_SKIP() << "../shared/data/synthrti-multi2-mat5 is absent";
+  test::ScratchDir dir;
+  const LightSet train = read_lp(*root / "Dome" / "dirs.lp");
+  const LightSet test_set = read_lp(*root / "Test" / "dirs.lp");
+  fit::FitOptions options;
+  options.model = ColourModel::kRGB;
+  texture::PtmStreamWriter writer(dir / "mat5.ptm");
+  const fit::FitReport report = fit::fit_capture(train, options, writer);
+  EXPECT_EQ(report.lights, 49);
+  const CoefficientMap map = texture::read_ptm(dir / "mat5.ptm");
+  double sum_psnr = 0.0;
+  for (const Light& light : test_set.lights) {
+    const Image photo = read_image(light.image);
+    const Image relit = texture::relight(map, light.direction);
+    sum_psnr += texture::compare_images(relit.view(), photo.view()).psnr_db;
+  }
+  const double mean_psnr = sum_psnr / static_cast<double>(test_set.size());
+  RecordProperty("mean_psnr_db", std::to_string(mean_psnr));
+  std::printf("SynthRTI multi2/mat5, rgb LS, .ptm, 20 test lights: mean PSNR %.3f dB\n", mean_psnr);
+  EXPECT_GE(mean_psnr, 20.0);
+}
+
+// Loewenkopf: 240 real photographs (64x43 JPEG) of a carved lion head.
+TEST(RealData, LoewenkopfFitsAndReproducesItsPhotographs) {
+  const auto root = test::shared_data("loewenkopf");
+  if (!root) GTEST_SKIP() << "../shared/data/loewenkopf is absent";
+  test::ScratchDir dir;
+  const LightSet lights = read_lp(*root / "dirs.lp");
+  ASSERT_EQ(lights.size(), 240u);
+  for (ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB}) {
+    fit::FitOptions options;
+    options.model = model;
+    texture::PtmStreamWriter writer(dir / "lion.ptm");
+    const fit::FitReport report = fit::fit_capture(lights, options, writer);
+    EXPECT_EQ(report.width, 64);
+    EXPECT_EQ(report.height, 43);
+    EXPECT_LT(report.design.condition_number, 20.0);
+    const CoefficientMap map = texture::read_ptm(dir / "lion.ptm");
+    // The fit's own residual (unquantised) and the stored file's error at the capture lights
+    // agree to within what 8-bit quantisation adds.
+    double sum_sq = 0.0;
+    std::size_t n = 0;
+    for (const Light& light : lights.lights) {
+      const auto cmp = texture::compare_images(texture::relight(map, light.direction).view(),
+                                               read_image(light.image).view());
+      sum_sq += cmp.rmse * cmp.rmse;
+      ++n;
+    }
+    const double rms_grey = 255.0 * std::sqrt(sum_sq / static_cast<double>(n));
+    std::printf("loewenkopf %s: fit residual rms %.2f grey, stored .ptm rms %.2f grey\n",
+                std::string(to_string(model)).c_str(), report.residuals.rms_grey, rms_grey);
+    EXPECT_NEAR(rms_grey, report.residuals.rms_grey, 0.5 + 0.05 * report.residuals.rms_grey);
+  }
+}
+
+}  // namespace
+}  // namespace ptmkit

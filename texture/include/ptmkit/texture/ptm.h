@@ -1,0 +1,233 @@
+// Reading and writing polynomial texture maps in HP's .ptm format (version 1.2; 1.1 LRGB is
+// read too).
+//
+// File layout (PTM 1.2, uncompressed):
+//   PTM_1.2                     magic
+//   PTM_FORMAT_RGB              or PTM_FORMAT_LRGB
+//   W                           width, on its own line
+//   H                           height, on its own line (some viewers need the separate lines)
+//   s0 s1 s2 s3 s4 s5           float scales, one per coefficient index
+//   b0 b1 b2 b3 b4 b5           integer biases in 0..255
+//   <binary block>
+// A stored byte k of coefficient index i means a_i = s_i * (k - b_i), with the polynomial
+// giving 0..255 units. Rows are stored bottom-up: the first stored row is the image's bottom
+// row. PTM_FORMAT_RGB stores three planes R, G, B, each W*H*6 bytes (a0..a5 per pixel).
+// PTM_FORMAT_LRGB (1.2) stores a W*H*6 block of luminance coefficients, then a W*H*3 block
+// of RGB bytes; the output is clamp(L / 255 * rgb). PTM 1.1 LRGB interleaves the 9 bytes of
+// each pixel (a0..a5, r, g, b).
+//
+// Mapping to CoefficientMap (normalised units, 1.0 at full scale): a file coefficient is
+// 255 times a map coefficient.
+//   kRGB  -> PTM_FORMAT_RGB.
+//   kLRGB -> PTM_FORMAT_LRGB, rgb byte = round(255 * colour) clamped to 0..255 (the map keeps
+//            the colour's largest channel at 1, so the bytes use the full range).
+//   kYCC  -> PTM_FORMAT_RGB, exactly: the three polynomials share a0..a4 (the Y polynomial)
+//            and differ only in a5: R = Y + 1.402 Cr, G = Y - 0.344136 Cb - 0.714136 Cr,
+//            B = Y + 1.772 Cb (core/colour.h from_ycbcr applied to (a5, cb, cr)).
+// Reading gives kRGB or kLRGB; see decode_ptm.
+//
+// Quantisation rule (choose_quantisation): per coefficient index i, shared by every texel and
+// every plane, over the file coefficients' actual range [lo_i, hi_i] widened to include 0.
+// The bias is an integer, so the byte equal to the bias decodes to exactly 0: a coefficient
+// that is 0 in the map (a flat texel's a0..a4, say) stays exactly 0, and a constant map
+// relights to a constant. The bias is the byte nearest -lo / (hi - lo) * 255 (of its floor
+// and ceiling, the one giving the smaller scale) and the scale the smallest that reaches both
+// ends from it; bytes are round(a / s + b) clamped to 0..255. The worst-case coefficient
+// error is half a step, s_i / 2 (file units). An all-zero index gets scale 1, bias 0.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "ptmkit/core/coefficients.h"
+
+namespace ptmkit::texture {
+
+enum class PtmVersion { k1_1, k1_2 };
+enum class PtmFormat { kRGB, kLRGB };
+[[nodiscard]] std::string_view to_string(PtmVersion version);  // "PTM_1.1", "PTM_1.2"
+[[nodiscard]] std::string_view to_string(PtmFormat format);    // "PTM_FORMAT_RGB", ...
+
+// The six scales and biases of a file, shared by every texel and every plane.
+struct PtmQuantisation {
+  std::array<float, kPtmTerms> scales{1, 1, 1, 1, 1, 1};
+  std::array<int, kPtmTerms> biases{0, 0, 0, 0, 0, 0};
+  bool operator==(const PtmQuantisation&) const = default;
+};
+
+// Quantisation for file coefficients (0..255 units) spanning [lo[i], hi[i]] per index i, by
+// the rule above. Non-finite bounds are a programmer error.
+[[nodiscard]] PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
+                                                  const std::array<double, kPtmTerms>& hi);
+
+// Header fields of a file.
+struct PtmInfo {
+  std::filesystem::path path;
+  PtmVersion version = PtmVersion::k1_2;
+  PtmFormat format = PtmFormat::kRGB;
+  int width = 0;
+  int height = 0;
+  PtmQuantisation quantisation;
+  std::size_t header_bytes = 0;    // text header, including its last line end
+  std::size_t data_bytes = 0;      // binary block the header implies
+  std::size_t file_bytes = 0;      // size on disk
+  std::size_t trailing_bytes = 0;  // bytes after the binary block (kept, see PtmFile)
+
+  // Bytes per texel in the file: 18 for RGB, 9 for LRGB.
+  [[nodiscard]] int bytes_per_texel() const;
+};
+
+// A .ptm file in memory, as stored: enough to write it back bit-exactly.
+struct PtmFile {
+  PtmVersion version = PtmVersion::k1_2;
+  PtmFormat format = PtmFormat::kRGB;
+  int width = 0;
+  int height = 0;
+  PtmQuantisation quantisation;
+  // The binary block in file order (bottom-up rows; planar for 1.2, interleaved for 1.1).
+  std::vector<std::uint8_t> data;
+  // Bytes found after the binary block. Tolerated on reading (some writers pad files) and
+  // written back unchanged, so that read -> write is bit-exact.
+  std::vector<std::uint8_t> trailing;
+  // The header text exactly as read (including its last line end). write_ptm_file writes it
+  // verbatim when it still says what the fields above say (so foreign spacing, CRLF and
+  // number spellings survive a rewrite); otherwise, and when empty, the canonical header:
+  // one item per line, scales in the shortest form that reads back to the same float.
+  std::string header;
+
+  [[nodiscard]] std::size_t texels() const { return static_cast<std::size_t>(width) * height; }
+  // Stored byte of coefficient `term` of `plane` (0..2 for RGB, 0 for LRGB) at (x, y), y
+  // counted from the top as in CoefficientMap.
+  [[nodiscard]] std::uint8_t coeff_byte(int x, int y, int plane, int term) const;
+  // Stored colour byte (0 = r .. 2 = b) of an LRGB file at (x, y), y from the top.
+  [[nodiscard]] std::uint8_t rgb_byte(int x, int y, int channel) const;
+  // Decoded coefficient in file units (0..255): scale * (byte - bias).
+  [[nodiscard]] double coefficient(int x, int y, int plane, int term) const;
+  // The canonical header text for the fields above.
+  [[nodiscard]] std::string canonical_header() const;
+};
+
+// Reads a whole file. Accepted: any whitespace between header items (spaces, tabs, line
+// breaks, CRLF; scales or biases split across lines), trailing spaces on the last header
+// line, bytes after the binary block (kept in `trailing`). Errors (ptmkit::Error naming the
+// file and the problem): a missing or unreadable file, a wrong magic, an unsupported version
+// or format (compressed and palette formats, PTM 1.1 RGB), a non-numeric, non-positive or
+// absurd width or height (each at most kMaxPtmSide, W*H at most kMaxPtmTexels), a NaN,
+// infinite or zero scale, a bias that is not an integer in 0..255, a header whose last line
+// is not terminated, and a binary block shorter than the header implies (expected and present
+// byte counts given). Negative scales are accepted: the format allows them.
+[[nodiscard]] PtmFile read_ptm_file(const std::filesystem::path& path);
+// The header only (the binary block's presence is not checked; file_bytes says how much is
+// there).
+[[nodiscard]] PtmInfo read_ptm_info(const std::filesystem::path& path);
+// Writes a file atomically, exactly as held (see PtmFile::header).
+void write_ptm_file(const std::filesystem::path& path, const PtmFile& file);
+
+inline constexpr int kMaxPtmSide = 1 << 20;
+inline constexpr std::size_t kMaxPtmTexels = std::size_t{1} << 32;
+
+struct PtmWriteOptions {
+  // Relit quantisation error is measured at these light directions (light frame, z > 0).
+  // Empty: the seed paper's once-subdivided geodesic dome (40 lights, core/light_layout.h).
+  std::vector<Eigen::Vector3d> report_lights;
+  // At most this many texels (a fixed stride over the map) enter the relit error, so the
+  // report costs little on large maps. 0 skips the relit error.
+  std::size_t report_max_texels = std::size_t{1} << 18;
+};
+
+// What quantisation cost.
+struct PtmWriteReport {
+  std::filesystem::path path;
+  PtmFormat format = PtmFormat::kRGB;
+  PtmQuantisation quantisation;
+  std::size_t file_bytes = 0;
+  // Coefficient error over every stored coefficient (normalised units, map scale; for kYCC
+  // the written RGB polynomials, for kLRGB the luminance polynomial).
+  double max_coeff_error = 0.0;
+  double rms_coeff_error = 0.0;
+  // Relit error, quantised vs unquantised, clamped to [0, 1], in grey levels (1/255 of full
+  // scale), over report_lights and the sampled texels, all three channels.
+  double relit_mean_abs_grey = 0.0;
+  double relit_max_abs_grey = 0.0;
+  double relit_psnr_db = 0.0;  // peak 1.0 in normalised units; +inf when identical
+  std::size_t relit_samples = 0;
+  [[nodiscard]] std::string brief() const;
+};
+
+// Quantises a map into a file in memory (no I/O). `report` (optional) gets the errors.
+[[nodiscard]] PtmFile encode_ptm(const CoefficientMap& map, const PtmWriteOptions& options = {},
+                                 PtmWriteReport* report = nullptr);
+// encode_ptm + write_ptm_file.
+PtmWriteReport write_ptm(const std::filesystem::path& path, const CoefficientMap& map,
+                         const PtmWriteOptions& options = {});
+
+// The file's polynomials as a map in normalised units. PTM_FORMAT_RGB gives kRGB with
+// coefficient = scale * (byte - bias) / 255. PTM_FORMAT_LRGB gives kLRGB keeping the map's
+// convention that the colour's largest channel is 1: with m the texel's largest rgb byte,
+// colour = rgb / m and the luminance coefficients are multiplied by m / 255, so the product
+// (what is seen) is the file's exactly; a black texel (m = 0) keeps colour 0. The format has
+// no colour space: the caller says what the fitted values were.
+[[nodiscard]] CoefficientMap decode_ptm(const PtmFile& file,
+                                        ColourSpace colour_space = ColourSpace::kSRGB);
+// read_ptm_file + decode_ptm.
+[[nodiscard]] CoefficientMap read_ptm(const std::filesystem::path& path,
+                                      ColourSpace colour_space = ColourSpace::kSRGB);
+
+// A file's contents summarised (what `ptmkit info` shows).
+struct PtmSummary {
+  PtmInfo info;
+  // Per coefficient index: the range the stored bytes actually take, and the range the scale
+  // and bias can represent, both in file units (0..255).
+  std::array<double, kPtmTerms> coeff_min{}, coeff_max{};
+  std::array<double, kPtmTerms> representable_min{}, representable_max{};
+  // Memory per texel: in the file, and as a float CoefficientMap once decoded.
+  int file_bytes_per_texel = 0;
+  int map_bytes_per_texel = 0;
+};
+// Reads the whole file (so a truncated file is reported) and summarises it.
+[[nodiscard]] PtmSummary summarise_ptm(const std::filesystem::path& path);
+
+// Streams a fit into a .ptm without a float copy of the map. Per texel it keeps the file's
+// polynomials (normalised units) as IEEE half floats — 2 bytes per coefficient instead of 4:
+// 36 bytes per texel for kRGB, 16 for kYCC (a0..a4 shared, three a5), 12 for kLRGB plus 3
+// colour bytes — and their running min/max. end() chooses the quantisation, encodes, and
+// writes the file atomically. The result equals write_ptm on the same map except where
+// rounding a coefficient to half (relative error at most 2^-11) moves it across a byte
+// boundary: each byte then differs by one step, so a relit value differs by at most
+// sum_i scale_i * |basis_i| / 255 and in practice by less than one grey level (tested).
+// The report compares the written file with the half values.
+class PtmStreamWriter final : public CoefficientSink {
+ public:
+  explicit PtmStreamWriter(std::filesystem::path path, PtmWriteOptions options = {});
+  ~PtmStreamWriter() override;
+  PtmStreamWriter(const PtmStreamWriter&) = delete;
+  PtmStreamWriter& operator=(const PtmStreamWriter&) = delete;
+
+  void begin(int width, int height, ColourModel model, ColourSpace colour_space) override;
+  // Bands must arrive top to bottom, consecutive; anything else throws std::logic_error.
+  void write_rows(int y0, int rows, const float* coeffs, const float* colour) override;
+  // Throws std::logic_error if rows are missing, ptmkit::Error if the write fails.
+  void end() override;
+
+  // Valid after end().
+  [[nodiscard]] const PtmWriteReport& report() const { return report_; }
+  // Bytes held for the coefficients and colours (for the memory budget).
+  [[nodiscard]] std::size_t buffer_bytes() const;
+
+  struct Impl;  // storage, defined in the implementation
+
+ private:
+  std::filesystem::path path_;
+  PtmWriteOptions options_;
+  PtmWriteReport report_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ptmkit::texture

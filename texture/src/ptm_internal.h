@@ -1,0 +1,214 @@
+// Shared by the .ptm writers (whole map and streaming): byte layout, the map-to-file
+// polynomial conversion, and the encoder with its error report, written once over a "source"
+// of texels so both writers quantise identically.
+#pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "ptmkit/core/light_layout.h"
+#include "ptmkit/texture/ptm.h"
+
+namespace ptmkit::texture::internal {
+
+inline int bytes_per_texel(PtmFormat format) { return format == PtmFormat::kRGB ? 18 : 9; }
+inline int planes(PtmFormat format) { return format == PtmFormat::kRGB ? 3 : 1; }
+
+// round(255 * v) clamped to 0..255.
+inline std::uint8_t colour_byte(float v) {
+  double b = std::round(255.0 * static_cast<double>(v));
+  if (!(b >= 0.0)) b = 0.0;  // negative or NaN
+  return static_cast<std::uint8_t>(std::min(b, 255.0));
+}
+
+// File coefficient (0..255 units) to byte: round(c / s + b) clamped to 0..255.
+inline std::uint8_t quantise(double c, float scale, int bias) {
+  double v = std::round(c / static_cast<double>(scale)) + bias;
+  // Round c / s rather than c / s + b: identical for integer b, and exact for c = 0.
+  if (!(v >= 0.0)) v = 0.0;
+  return static_cast<std::uint8_t>(std::min(v, 255.0));
+}
+
+std::size_t coeff_offset(const PtmFile& f, int x, int y, int plane, int term);
+std::size_t rgb_offset(const PtmFile& f, int x, int y, int channel);
+// The file's value at (x, y) lit from (lu, lv), normalised units, unclamped.
+void file_relit(const PtmFile& f, int x, int y, double lu, double lv, float rgb[3]);
+// A map texel as file polynomials in normalised units: `polys` gets planes * 6 values (3
+// planes for kRGB and kYCC, 1 for kLRGB), `rgb` the colour bytes for kLRGB.
+void file_polynomials(ColourModel model, const float* coeffs, const float* colour, float* polys,
+                      std::uint8_t* rgb);
+PtmFormat format_for(ColourModel model);
+
+// Per coefficient index, min and max of the file polynomials (normalised units) over every
+// texel and plane. A non-finite value makes that index's bounds NaN.
+template <class Source>
+void coefficient_range(const Source& source, int width, int height, PtmFormat format,
+                       std::array<double, kPtmTerms>* lo, std::array<double, kPtmTerms>* hi) {
+  const int np = planes(format);
+  std::vector<std::array<double, kPtmTerms>> row_lo(height), row_hi(height);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      auto& l = row_lo[y];
+      auto& h = row_hi[y];
+      l.fill(std::numeric_limits<double>::infinity());
+      h.fill(-std::numeric_limits<double>::infinity());
+      float polys[3 * kPtmTerms] = {};
+      std::uint8_t rgb[3];
+      for (int x = 0; x < width; ++x) {
+        source.texel(x, y, polys, rgb);
+        for (int p = 0; p < np; ++p) {
+          for (int i = 0; i < kPtmTerms; ++i) {
+            const double v = polys[p * kPtmTerms + i];
+            if (!std::isfinite(v)) {
+              l[i] = h[i] = std::numeric_limits<double>::quiet_NaN();
+            } else if (!std::isnan(l[i])) {
+              l[i] = std::min(l[i], v);
+              h[i] = std::max(h[i], v);
+            }
+          }
+        }
+      }
+    }
+  });
+  lo->fill(std::numeric_limits<double>::infinity());
+  hi->fill(-std::numeric_limits<double>::infinity());
+  for (int y = 0; y < height; ++y) {
+    for (int i = 0; i < kPtmTerms; ++i) {
+      if (std::isnan(row_lo[y][i]) || std::isnan((*lo)[i])) {
+        (*lo)[i] = (*hi)[i] = std::numeric_limits<double>::quiet_NaN();
+      } else {
+        (*lo)[i] = std::min((*lo)[i], row_lo[y][i]);
+        (*hi)[i] = std::max((*hi)[i], row_hi[y][i]);
+      }
+    }
+  }
+}
+
+// Relit error of `file` against `source` (see PtmWriteReport).
+template <class Source>
+void relit_error(const Source& source, const PtmFile& file, const PtmWriteOptions& options,
+                 PtmWriteReport* report) {
+  report->relit_mean_abs_grey = report->relit_max_abs_grey = 0.0;
+  report->relit_psnr_db = std::numeric_limits<double>::infinity();
+  report->relit_samples = 0;
+  if (options.report_max_texels == 0) return;
+  std::vector<Eigen::Vector3d> lights =
+      options.report_lights.empty() ? geodesic_dome(2) : options.report_lights;
+  std::vector<std::array<double, 2>> luv;
+  for (const auto& l : lights) {
+    const double n = l.norm();
+    if (!std::isfinite(n) || n == 0.0 || l.z() <= 0.0) continue;
+    luv.push_back({l.x() / n, l.y() / n});
+  }
+  if (luv.empty()) return;
+  const std::size_t texels = file.texels();
+  const std::size_t stride = std::max<std::size_t>(
+      1, (texels + options.report_max_texels - 1) / options.report_max_texels);
+  const std::size_t samples = (texels + stride - 1) / stride;
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t chunks = (samples + kChunk - 1) / kChunk;
+  struct Sums {
+    double abs = 0.0, sq = 0.0, max = 0.0;
+    std::size_t n = 0;
+  };
+  std::vector<Sums> sums(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    Sums s;
+    const std::size_t end = std::min(samples, (c + 1) * kChunk);
+    for (std::size_t k = c * kChunk; k < end; ++k) {
+      const std::size_t t = k * stride;
+      const int x = static_cast<int>(t % file.width);
+      const int y = static_cast<int>(t / file.width);
+      for (const auto& l : luv) {
+        float a[3], b[3];
+        source.relit(x, y, l[0], l[1], a);
+        file_relit(file, x, y, l[0], l[1], b);
+        for (int ch = 0; ch < 3; ++ch) {
+          const double d = std::abs(std::clamp(static_cast<double>(a[ch]), 0.0, 1.0) -
+                                    std::clamp(static_cast<double>(b[ch]), 0.0, 1.0));
+          s.abs += d;
+          s.sq += d * d;
+          s.max = std::max(s.max, d);
+          ++s.n;
+        }
+      }
+    }
+    sums[c] = s;
+  });
+  Sums total;
+  for (const Sums& s : sums) {
+    total.abs += s.abs;
+    total.sq += s.sq;
+    total.max = std::max(total.max, s.max);
+    total.n += s.n;
+  }
+  if (total.n == 0) return;
+  report->relit_samples = total.n;
+  report->relit_mean_abs_grey = 255.0 * total.abs / static_cast<double>(total.n);
+  report->relit_max_abs_grey = 255.0 * total.max;
+  const double mse = total.sq / static_cast<double>(total.n);
+  report->relit_psnr_db =
+      mse > 0.0 ? 10.0 * std::log10(1.0 / mse) : std::numeric_limits<double>::infinity();
+}
+
+// Quantises every texel of `source` with `q` into a PTM 1.2 file; fills `report` (optional).
+template <class Source>
+PtmFile encode(const Source& source, int width, int height, PtmFormat format,
+               const PtmQuantisation& q, const PtmWriteOptions& options, PtmWriteReport* report) {
+  PtmFile f;
+  f.version = PtmVersion::k1_2;
+  f.format = format;
+  f.width = width;
+  f.height = height;
+  f.quantisation = q;
+  f.data.resize(f.texels() * static_cast<std::size_t>(bytes_per_texel(format)));
+  const int np = planes(format);
+  std::vector<double> row_max(height, 0.0), row_sq(height, 0.0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      double mx = 0.0, sq = 0.0;
+      float polys[3 * kPtmTerms] = {};
+      std::uint8_t rgb[3] = {0, 0, 0};
+      for (int x = 0; x < width; ++x) {
+        source.texel(x, y, polys, rgb);
+        for (int p = 0; p < np; ++p) {
+          for (int i = 0; i < kPtmTerms; ++i) {
+            const double c = 255.0 * static_cast<double>(polys[p * kPtmTerms + i]);
+            const std::uint8_t byte = quantise(c, q.scales[i], q.biases[i]);
+            f.data[coeff_offset(f, x, y, p, i)] = byte;
+            const double e =
+                std::abs(static_cast<double>(q.scales[i]) * (byte - q.biases[i]) - c) / 255.0;
+            mx = std::max(mx, e);
+            sq += e * e;
+          }
+        }
+        if (format == PtmFormat::kLRGB) {
+          for (int ch = 0; ch < 3; ++ch) f.data[rgb_offset(f, x, y, ch)] = rgb[ch];
+        }
+      }
+      row_max[y] = mx;
+      row_sq[y] = sq;
+    }
+  });
+  if (report != nullptr) {
+    report->format = format;
+    report->quantisation = q;
+    double mx = 0.0, sq = 0.0;
+    for (int y = 0; y < height; ++y) {
+      mx = std::max(mx, row_max[y]);
+      sq += row_sq[y];
+    }
+    report->max_coeff_error = mx;
+    report->rms_coeff_error = std::sqrt(sq / static_cast<double>(f.texels() * np * kPtmTerms));
+    relit_error(source, f, options, report);
+  }
+  return f;
+}
+
+}  // namespace ptmkit::texture::internal
