@@ -1,4 +1,4 @@
-// ptmkit fit LIGHTS.lp -o OUT.ptm: least-squares polynomial fit of a capture.
+// ptmkit fit LIGHTS.lp -o OUT.ptm: polynomial fit of a capture, least squares or robust.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -9,6 +9,7 @@
 #include "progress.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/texture/ptm.h"
@@ -25,8 +26,20 @@ struct FitArgs {
   std::string format = "rgb";
   std::string report;
   std::string precision = "float";
+  std::string solver = "ls";
+  std::string residual_map;
+  std::string outlier_map;
+  std::string normals;
   fit::FitOptions options;
 };
+
+// Checks an output map's extension before the fit runs (no work lost on a typo).
+void check_map_path(const std::string& path, const char* flag, bool png_ok) {
+  if (path.empty()) return;
+  const auto ext = fs::path(path).extension();
+  if (ext == ".exr" || (png_ok && ext == ".png")) return;
+  throw Error(path + ": " + flag + " must be an .exr file" + (png_ok ? " or a .png file" : ""));
+}
 
 void run_fit(const FitArgs& args) {
   fit::FitOptions options = args.options;
@@ -40,24 +53,49 @@ void run_fit(const FitArgs& args) {
   if (out_path.extension() != ".ptm") {
     throw Error(out_path.string() + ": the output must be a .ptm file");
   }
+  options.solver = fit::parse_solver(args.solver);
+  check_map_path(args.residual_map, "--residual-map", false);
+  check_map_path(args.outlier_map, "--outlier-map", false);
+  check_map_path(args.normals, "--normals", true);
+  fit::FitOutputs outputs;
+  outputs.want_residual_map = !args.residual_map.empty();
+  outputs.want_outlier_counts = !args.outlier_map.empty();
+  outputs.want_normals = !args.normals.empty();
+  if (outputs.want_residual_map || outputs.want_outlier_counts || outputs.want_normals) {
+    options.outputs = &outputs;
+  }
   options.progress = make_progress("fit");
   const LightSet lights = read_lp(args.lights);
   texture::PtmStreamWriter writer(out_path);
   const fit::FitReport report = fit::fit_capture(lights, options, writer);
+  const ImageWriteOptions exr{PixelFormat::kF32};
+  if (outputs.want_residual_map) write_image(args.residual_map, outputs.residual_map.view(), exr);
+  if (outputs.want_outlier_counts) {
+    write_image(args.outlier_map, outputs.outlier_counts.view(), exr);
+  }
+  if (outputs.want_normals) {
+    if (fs::path(args.normals).extension() == ".png") {
+      Image enc = outputs.normals;  // (n + 1) / 2 in 16 bits
+      for (std::size_t i = 0; i < enc.size(); ++i) enc.data()[i] = 0.5f * (enc.data()[i] + 1.0f);
+      write_image(args.normals, enc.view(), ImageWriteOptions{PixelFormat::kU16});
+    } else {
+      write_image(args.normals, outputs.normals.view(), exr);
+    }
+  }
   const texture::PtmWriteReport& ptm = writer.report();
 
   if (!args.report.empty()) {
     nlohmann::json j = nlohmann::json::parse(report.to_json());
     j["input"] = fs::absolute(args.lights).lexically_normal().string();
     j["output"] = fs::absolute(out_path).lexically_normal().string();
-    j["quantisation"] = {{"file_bytes", ptm.file_bytes},
-                         {"max_coeff_error", ptm.max_coeff_error},
-                         {"rms_coeff_error", ptm.rms_coeff_error},
-                         {"relit_mean_abs_grey", ptm.relit_mean_abs_grey},
-                         {"relit_max_abs_grey", ptm.relit_max_abs_grey},
-                         {"relit_psnr_db", std::isfinite(ptm.relit_psnr_db)
-                                               ? nlohmann::json(ptm.relit_psnr_db)
-                                               : nlohmann::json("inf")}};
+    j["quantisation"] = {
+        {"file_bytes", ptm.file_bytes},
+        {"max_coeff_error", ptm.max_coeff_error},
+        {"rms_coeff_error", ptm.rms_coeff_error},
+        {"relit_mean_abs_grey", ptm.relit_mean_abs_grey},
+        {"relit_max_abs_grey", ptm.relit_max_abs_grey},
+        {"relit_psnr_db", std::isfinite(ptm.relit_psnr_db) ? nlohmann::json(ptm.relit_psnr_db)
+                                                           : nlohmann::json("inf")}};
     write_file_atomic(args.report, j.dump(2) + "\n");
   }
   std::printf(
@@ -66,6 +104,14 @@ void run_fit(const FitArgs& args) {
       report.lights, report.width, report.height, std::string(to_string(report.model)).c_str(),
       report.design.condition_number, report.residuals.rms_grey, report.residuals.p99_abs_grey,
       report.total_seconds, report.texels_per_second() / 1e6, report.threads);
+  if (!fit::is_shared_solver(report.solver)) {
+    const double total = std::max<double>(1.0, static_cast<double>(report.outliers.samples));
+    std::printf("solver %s: %.2f%% samples shadow, %.2f%% highlight, %llu fallback texels\n",
+                std::string(fit::to_string(report.solver)).c_str(),
+                100.0 * static_cast<double>(report.outliers.shadows) / total,
+                100.0 * static_cast<double>(report.outliers.highlights) / total,
+                static_cast<unsigned long long>(report.outliers.fallback_texels));
+  }
   std::printf("wrote %s (%zu bytes; quantisation: relit mean %.3f, max %.3f grey levels)\n",
               out_path.string().c_str(), ptm.file_bytes, ptm.relit_mean_abs_grey,
               ptm.relit_max_abs_grey);
@@ -109,6 +155,40 @@ void add_fit_command(CLI::App& root) {
                   "Arithmetic applying the pseudo-inverse: float (fast) or double")
       ->capture_default_str()
       ->check(CLI::IsMember({"float", "double"}));
+  std::string solvers;
+  for (const auto& n : fit::solver_names()) solvers += (solvers.empty() ? "" : ", ") + n;
+  cmd->add_option("--solver", args->solver,
+                  "Per-texel solver: ls (shared pseudo-inverse, Cholesky), qr, svd, ridge "
+                  "(lambda from --ridge, else 1e-3), irls-huber, irls-tukey, trim, sign, lambert, "
+                  "ceres-huber, ceres-cauchy, ceres-tukey, or robust (rejects shadowed and "
+                  "specular samples; = lambert). Speed and accuracy: docs/SOLVERS.md")
+      ->capture_default_str()
+      ->check(CLI::IsMember(fit::solver_names()));
+  cmd->add_option("--shadow-k", args->options.robust.shadow_k,
+                  "sign/lambert: samples more than this many robust scales below the fit are "
+                  "shadows")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--highlight-k", args->options.robust.highlight_k,
+                  "sign/lambert: samples more than this many robust scales above the fit are "
+                  "highlights")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--dark-fraction", args->options.robust.dark_fraction,
+                  "trim/sign/lambert: samples darker than this fraction of the texel's "
+                  "75th-percentile sample are shadows")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.99));
+  cmd->add_option("--residual-map", args->residual_map,
+                  "Write the RMS residual over each texel's inlier samples (grey levels) as a "
+                  "1-channel float .exr");
+  cmd->add_option("--outlier-map", args->outlier_map,
+                  "Write per-texel counts of shadow and highlight samples as a 2-channel float "
+                  ".exr");
+  cmd->add_option("--normals", args->normals,
+                  "Write Lambertian photometric-stereo normals from the inlier samples: .exr "
+                  "(float xyz) or .png (16-bit, (n + 1) / 2); R, G, B = x, y, z in the light "
+                  "file's frame");
   cmd->add_flag("!--no-residuals", args->options.residual_stats,
                 "Skip the residual statistics (saves about half the fit arithmetic)");
   cmd->callback([args] { run_fit(*args); });

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include <Eigen/Cholesky>
+#include <Eigen/QR>
 #include <Eigen/SVD>
 
 #include "ptmkit/core/coefficients.h"
@@ -99,16 +100,35 @@ LightDesign LightDesign::build(const std::vector<Eigen::Vector3d>& dirs,
   if (!d.report_.problem.empty()) throw Error("cannot fit this light layout: " + d.report_.problem);
   d.design_ = basis_matrix(dirs);
   const auto n = d.design_.rows();
-  Eigen::MatrixXd normal = d.design_.transpose() * d.design_;
-  if (options.ridge_lambda > 0.0) {
-    normal.diagonal().array() += options.ridge_lambda * static_cast<double>(n);
+  if (options.method == PinvMethod::kCholesky) {
+    Eigen::MatrixXd normal = d.design_.transpose() * d.design_;
+    if (options.ridge_lambda > 0.0) {
+      normal.diagonal().array() += options.ridge_lambda * static_cast<double>(n);
+    }
+    const Eigen::LLT<Eigen::MatrixXd> llt(normal);
+    if (llt.info() != Eigen::Success) {
+      throw Error(
+          "cannot fit this light layout: the normal matrix A^T A is not positive "
+          "definite (rank-deficient layout); use --ridge");
+    }
+    d.pinv_ = llt.solve(d.design_.transpose());
+  } else {
+    // Ridge as an augmented least-squares problem: [A; sqrt(lambda N) I] c = [s; 0].
+    Eigen::MatrixXd aug = d.design_;
+    if (options.ridge_lambda > 0.0) {
+      aug.conservativeResize(n + kPtmTerms, Eigen::NoChange);
+      aug.bottomRows(kPtmTerms) = Eigen::MatrixXd::Identity(kPtmTerms, kPtmTerms) *
+                                  std::sqrt(options.ridge_lambda * static_cast<double>(n));
+    }
+    const Eigen::MatrixXd eye = Eigen::MatrixXd::Identity(aug.rows(), aug.rows());
+    Eigen::MatrixXd full;
+    if (options.method == PinvMethod::kQR) {
+      full = aug.colPivHouseholderQr().solve(eye);
+    } else {
+      full = aug.jacobiSvd(Eigen::ComputeThinU | Eigen::ComputeThinV).solve(eye);
+    }
+    d.pinv_ = full.leftCols(n);
   }
-  const Eigen::LLT<Eigen::MatrixXd> llt(normal);
-  if (llt.info() != Eigen::Success) {
-    throw Error("cannot fit this light layout: the normal matrix A^T A is not positive "
-                "definite (rank-deficient layout); use --ridge");
-  }
-  d.pinv_ = llt.solve(d.design_.transpose());
   d.pinv_f_ = d.pinv_.cast<float>();
   return d;
 }

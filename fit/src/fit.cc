@@ -4,12 +4,14 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <limits>
 
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
@@ -33,6 +35,8 @@ constexpr double kHistBinGrey = 0.05;
 constexpr int kHistBins = 5121;
 
 struct RowStats {
+  bool active = false;  // this row is in the residual-statistics sample
+  OutlierSummary outliers;
   double sum_sq = 0.0;
   double sum_abs = 0.0;
   double max_abs = 0.0;
@@ -53,6 +57,14 @@ struct StatsTotal {
   double sum_sq = 0.0, sum_abs = 0.0, max_abs = 0.0;
   std::uint64_t count = 0;
   std::vector<std::uint64_t> hist = std::vector<std::uint64_t>(kHistBins, 0);
+  OutlierSummary outliers;
+  void merge_outliers(const RowStats& r) {
+    outliers.samples += r.outliers.samples;
+    outliers.shadows += r.outliers.shadows;
+    outliers.highlights += r.outliers.highlights;
+    outliers.fallback_texels += r.outliers.fallback_texels;
+    outliers.ceres_texels += r.outliers.ceres_texels;
+  }
   void merge(const RowStats& r) {
     sum_sq += r.sum_sq;
     sum_abs += r.sum_abs;
@@ -80,12 +92,37 @@ struct StatsTotal {
   }
 };
 
+// Residual statistics are a summary, not a product: above about a million texels they use
+// every k-th row (a fixed choice, so reports are reproducible), which keeps their cost, about
+// that of the fit itself, off large images.
+constexpr double kResidualSampleTexels = 1 << 20;
+int residual_row_step(int width, int height) {
+  const double texels = static_cast<double>(width) * height;
+  return std::max(1, static_cast<int>(std::ceil(texels / kResidualSampleTexels)));
+}
+
 // Fits one band. Output buffers: coeffs [texel][poly][term], colour [texel][colours].
 class BandFitter {
  public:
-  BandFitter(const LightDesign& design, const FitOptions& options, int width, int channels)
-      : design_(design), options_(options), width_(width), channels_(channels) {
+  BandFitter(const LightDesign& design, const FitOptions& options, int width, int height,
+             int channels)
+      : design_(design),
+        options_(options),
+        width_(width),
+        channels_(channels),
+        residual_row_step_(residual_row_step(width, height)) {
     a_f_ = design.design().cast<float>();
+    const auto n = design.design().rows();
+    light_.resize(n, 3);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double lu = design.design()(i, 3);
+      const double lv = design.design()(i, 4);
+      light_.row(i) << lu, lv, std::sqrt(std::max(0.0, 1.0 - lu * lu - lv * lv));
+    }
+    robust_ = !is_shared_solver(options.solver);
+    const FitOutputs* o = options.outputs;
+    extras_ = o != nullptr &&
+              (o->want_residual_map || o->want_outlier_counts || o->want_labels || o->want_normals);
   }
 
   void fit(const StackBand& band, std::vector<float>* coeffs, std::vector<float>* colour,
@@ -97,10 +134,16 @@ class BandFitter {
     stats->assign(static_cast<std::size_t>(band.rows), RowStats{});
     tbb::parallel_for(0, band.rows, [&](int r) {
       RowStats& st = (*stats)[static_cast<std::size_t>(r)];
-      if (options_.residual_stats) st.hist.assign(kHistBins, 0);
+      st.active = options_.residual_stats && (band.y0 + r) % residual_row_step_ == 0;
+      if (st.active) st.hist.assign(kHistBins, 0);
       float* c_out = coeffs->data() + static_cast<std::size_t>(r) * width_ * polys * kPtmTerms;
       float* col_out = colour->data() + static_cast<std::size_t>(r) * width_ * ncol;
-      fit_row(band, r, c_out, col_out, &st);
+      if (robust_) {
+        fit_row_texels(band, r, c_out, col_out, &st);
+      } else {
+        fit_row(band, r, c_out, col_out, &st);
+        if (extras_) row_extras(band, r, c_out, col_out);
+      }
     });
   }
 
@@ -122,7 +165,8 @@ class BandFitter {
     const int ch = channels_;
     const auto stride = static_cast<Eigen::Index>(band.image_stride());
     const float* first = band.image(0) + static_cast<std::size_t>(r) * w * ch;
-    const SampleMap samples(first, n, static_cast<Eigen::Index>(w) * ch, Eigen::OuterStride<>(stride));
+    const SampleMap samples(first, n, static_cast<Eigen::Index>(w) * ch,
+                            Eigen::OuterStride<>(stride));
 
     if (options_.model == ColourModel::kRGB) {
       if (ch == 3) {
@@ -136,7 +180,7 @@ class BandFitter {
           }
         }
       }
-      if (options_.residual_stats) {
+      if (st->active) {
         // Model values for every (light, texel, channel) at once: A (N x 6) times coeffs.
         const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(
             c_out, kPtmTerms, static_cast<Eigen::Index>(w) * 3);
@@ -191,7 +235,8 @@ class BandFitter {
         double sy = 0.0, scb = 0.0, scr = 0.0;
         if (ch == 3) {
           for (int i = 0; i < n; ++i) {
-            const auto ycc = to_ycbcr(samples(i, 3 * x), samples(i, 3 * x + 1), samples(i, 3 * x + 2));
+            const auto ycc =
+                to_ycbcr(samples(i, 3 * x), samples(i, 3 * x + 1), samples(i, 3 * x + 2));
             const double wgt = std::max(0.0, ycc.y);
             sy += wgt;
             scb += wgt * ycc.cb;
@@ -202,8 +247,9 @@ class BandFitter {
         col[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
       }
     }
-    if (options_.residual_stats) {
-      const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(c_out, kPtmTerms, w);
+    if (st->active) {
+      const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(c_out, kPtmTerms,
+                                                                                w);
       const RowMajorF model = a_f_ * c;  // N x W: L (LRGB, scaled) or Y (YCC)
       const int ncol = colour_count(options_.model);
       for (int i = 0; i < n; ++i) {
@@ -225,11 +271,248 @@ class BandFitter {
     }
   }
 
+  // One texel's samples in double: s[i * ch + k].
+  void gather(const StackBand& band, int r, int x, std::vector<double>* s) const {
+    const int n = band.images;
+    const int ch = channels_;
+    s->resize(static_cast<std::size_t>(n) * ch);
+    for (int i = 0; i < n; ++i) {
+      const float* p = band.image(i) + (static_cast<std::size_t>(r) * width_ + x) * ch;
+      for (int k = 0; k < ch; ++k) (*s)[static_cast<std::size_t>(i * ch + k)] = p[k];
+    }
+  }
+
+  void labelling_values(const std::vector<double>& s, int n, double* value,
+                        std::uint8_t* saturated) const {
+    const int ch = channels_;
+    const double sat = options_.robust.saturation_level;
+    for (int i = 0; i < n; ++i) {
+      const double* p = s.data() + static_cast<std::size_t>(i) * ch;
+      value[i] = ch == 3 ? luma(p[0], p[1], p[2]) : p[0];
+      bool clipped = false;
+      for (int k = 0; k < ch; ++k) clipped = clipped || p[k] >= sat;
+      if (saturated != nullptr) saturated[i] = clipped ? 1 : 0;
+    }
+  }
+
+  // The fitted model's RGB for light i of a texel (grey input: rgb[0] is the grey value).
+  void model_rgb(const float* coef, const float* col, int i, double rgb[3]) const {
+    const auto b = design_.design().row(i);
+    auto eval = [&](const float* c) {
+      double v = 0.0;
+      for (int t = 0; t < kPtmTerms; ++t) v += b(t) * c[t];
+      return v;
+    };
+    switch (options_.model) {
+      case ColourModel::kRGB:
+        for (int k = 0; k < 3; ++k) rgb[k] = eval(coef + k * kPtmTerms);
+        break;
+      case ColourModel::kLRGB: {
+        const double l = eval(coef);
+        for (int k = 0; k < 3; ++k) rgb[k] = l * col[k];
+        break;
+      }
+      case ColourModel::kYCC:
+        from_ycbcr({eval(coef), col[0], col[1]}, &rgb[0], &rgb[1], &rgb[2]);
+        break;
+    }
+  }
+
+  // Residual map, counts, labels, normals and albedo of one texel from its samples, weights
+  // (0 = rejected) and labels, and its fitted coefficients.
+  void texel_extras(const std::vector<double>& s, const double* value, const double* weights,
+                    const SampleLabel* labels, const float* coef, const float* col, int x,
+                    int y) const {
+    FitOutputs& o = *options_.outputs;
+    const int n = design_.lights();
+    const int ch = channels_;
+    if (o.want_residual_map) {
+      double sum = 0.0;
+      std::uint64_t cnt = 0;
+      for (int i = 0; i < n; ++i) {
+        if (labels[i] != SampleLabel::kInlier) continue;
+        double rgb[3];
+        model_rgb(coef, col, i, rgb);
+        for (int k = 0; k < ch; ++k) {
+          const double d = 255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]);
+          sum += d * d;
+          ++cnt;
+        }
+      }
+      o.residual_map.at(x, y, 0) =
+          cnt > 0 ? static_cast<float>(std::sqrt(sum / static_cast<double>(cnt))) : 0.0f;
+    }
+    if (o.want_outlier_counts) {
+      int sh = 0, hi = 0;
+      for (int i = 0; i < n; ++i) {
+        sh += labels[i] == SampleLabel::kShadow ? 1 : 0;
+        hi += labels[i] == SampleLabel::kHighlight ? 1 : 0;
+      }
+      o.outlier_counts.at(x, y, 0) = static_cast<float>(sh);
+      o.outlier_counts.at(x, y, 1) = static_cast<float>(hi);
+    }
+    if (o.want_labels) {
+      std::uint8_t* dst = o.labels.data() + (static_cast<std::size_t>(y) * width_ + x) * n;
+      for (int i = 0; i < n; ++i) dst[i] = static_cast<std::uint8_t>(labels[i]);
+    }
+    if (o.want_normals) {
+      // Lambertian photometric stereo: value_i = l_i . g with g = albedo * normal, over the
+      // inlier samples. Samples at or below zero carry no direction (attached shadow).
+      Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        const double w = weights[i];
+        if (w <= 0.0) continue;
+        const Eigen::Vector3d l = light_.row(i).transpose();
+        m.noalias() += w * l * l.transpose();
+        rhs += (w * value[i]) * l;
+      }
+      Eigen::Vector3d nrm(0.0, 0.0, 1.0);
+      const Eigen::LDLT<Eigen::Matrix3d> ldlt(m);
+      if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
+        const Eigen::Vector3d g = ldlt.solve(rhs);
+        if (g.allFinite() && g.norm() > 1e-12 && g.z() > 0.0) nrm = g.normalized();
+      }
+      double num[3] = {0.0, 0.0, 0.0};
+      double den = 0.0;
+      for (int i = 0; i < n; ++i) {
+        const double w = weights[i];
+        if (w <= 0.0) continue;
+        const double shade = std::max(0.0, light_.row(i).dot(nrm));
+        den += w * shade * shade;
+        for (int k = 0; k < 3; ++k)
+          num[k] += w * shade * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+      }
+      for (int k = 0; k < 3; ++k) {
+        o.normals.at(x, y, k) = static_cast<float>(nrm(k));
+        o.albedo.at(x, y, k) = den > 1e-20 ? static_cast<float>(num[k] / den) : 0.0f;
+      }
+    }
+  }
+
+  // Least-squares solvers: every sample is an inlier.
+  void row_extras(const StackBand& band, int r, const float* c_out, const float* col_out) const {
+    const int n = band.images;
+    const int polys = polynomial_count(options_.model);
+    const int ncol = colour_count(options_.model);
+    std::vector<double> s, value(static_cast<std::size_t>(n)),
+        weights(static_cast<std::size_t>(n), 1.0);
+    const std::vector<SampleLabel> labels(static_cast<std::size_t>(n), SampleLabel::kInlier);
+    for (int x = 0; x < width_; ++x) {
+      gather(band, r, x, &s);
+      labelling_values(s, n, value.data(), nullptr);
+      texel_extras(s, value.data(), weights.data(), labels.data(),
+                   c_out + static_cast<std::size_t>(x) * polys * kPtmTerms,
+                   col_out + static_cast<std::size_t>(x) * ncol, x, band.y0 + r);
+    }
+  }
+
+  // Robust solvers: per texel, label the samples on the labelling channel, then fit every
+  // polynomial with the same weights.
+  void fit_row_texels(const StackBand& band, int r, float* c_out, float* col_out,
+                      RowStats* st) const {
+    const int n = band.images;
+    const int ch = channels_;
+    const int polys = polynomial_count(options_.model);
+    const int ncol = colour_count(options_.model);
+    const auto un = static_cast<std::size_t>(n);
+    TexelSolver solver(design_.design(), options_.solver, options_.robust);
+    std::vector<double> s, value(un), weights(un), chan(un);
+    std::vector<std::uint8_t> saturated(un);
+    std::vector<SampleLabel> labels(un);
+    for (int x = 0; x < width_; ++x) {
+      gather(band, r, x, &s);
+      labelling_values(s, n, value.data(), saturated.data());
+      double c[kPtmTerms];
+      const TexelOutcome out =
+          solver.solve(value.data(), saturated.data(), weights.data(), labels.data(), c);
+      st->outliers.samples += un;
+      st->outliers.shadows += static_cast<std::uint64_t>(out.shadows);
+      st->outliers.highlights += static_cast<std::uint64_t>(out.highlights);
+      st->outliers.fallback_texels += out.fallback ? 1u : 0u;
+      st->outliers.ceres_texels += out.ceres_ran ? 1u : 0u;
+
+      float* coef = c_out + static_cast<std::size_t>(x) * polys * kPtmTerms;
+      float* col = col_out + static_cast<std::size_t>(x) * ncol;
+      auto store = [&](const double* v, float* dst) {
+        double cc[kPtmTerms];
+        solver.weighted_fit(v, weights.data(), cc);
+        for (int t = 0; t < kPtmTerms; ++t) dst[t] = static_cast<float>(cc[t]);
+      };
+      if (options_.model == ColourModel::kRGB) {
+        if (ch == 3) {
+          for (int k = 0; k < 3; ++k) {
+            for (int i = 0; i < n; ++i)
+              chan[static_cast<std::size_t>(i)] = s[static_cast<std::size_t>(i * 3 + k)];
+            store(chan.data(), coef + k * kPtmTerms);
+          }
+        } else {
+          store(value.data(), coef);
+          std::copy_n(coef, kPtmTerms, coef + kPtmTerms);
+          std::copy_n(coef, kPtmTerms, coef + 2 * kPtmTerms);
+        }
+      } else {
+        store(value.data(), coef);
+        if (options_.model == ColourModel::kLRGB) {
+          double yy = 0.0;
+          double yc[3] = {0.0, 0.0, 0.0};
+          for (int i = 0; i < n; ++i) {
+            const double w = weights[static_cast<std::size_t>(i)];
+            const double yi = value[static_cast<std::size_t>(i)];
+            yy += w * yi * yi;
+            for (int k = 0; k < 3; ++k)
+              yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+          }
+          double kk[3] = {1.0, 1.0, 1.0};
+          if (yy > 1e-20) {
+            for (int k = 0; k < 3; ++k) kk[k] = std::max(0.0, yc[k] / yy);
+          }
+          double m = std::max({kk[0], kk[1], kk[2]});
+          if (m <= 1e-12) {
+            kk[0] = kk[1] = kk[2] = 1.0;
+            m = 1.0;
+          }
+          for (int k = 0; k < 3; ++k) col[k] = static_cast<float>(kk[k] / m);
+          for (int t = 0; t < kPtmTerms; ++t) coef[t] = static_cast<float>(coef[t] * m);
+        } else {
+          double sy = 0.0, scb = 0.0, scr = 0.0;
+          if (ch == 3) {
+            for (int i = 0; i < n; ++i) {
+              const double* p = s.data() + static_cast<std::size_t>(i) * 3;
+              const auto ycc = to_ycbcr(p[0], p[1], p[2]);
+              const double wgt = weights[static_cast<std::size_t>(i)] * std::max(0.0, ycc.y);
+              sy += wgt;
+              scb += wgt * ycc.cb;
+              scr += wgt * ycc.cr;
+            }
+          }
+          col[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
+          col[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
+        }
+      }
+      if (st->active) {
+        for (int i = 0; i < n; ++i) {
+          double rgb[3];
+          model_rgb(coef, col, i, rgb);
+          for (int k = 0; k < ch; ++k)
+            st->add(255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]));
+        }
+      }
+      if (extras_) {
+        texel_extras(s, value.data(), weights.data(), labels.data(), coef, col, x, band.y0 + r);
+      }
+    }
+  }
+
   const LightDesign& design_;
   const FitOptions& options_;
   int width_;
   int channels_;
+  int residual_row_step_;
   Eigen::MatrixXf a_f_;
+  Eigen::MatrixX3d light_;  // unit light directions (for normals)
+  bool robust_ = false;
+  bool extras_ = false;
 };
 
 using BandSource = std::function<bool(int rows, StackBand* band)>;
@@ -246,10 +529,20 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
   report.model = options.model;
   report.colour_space = colour_space;
   report.design = design.report();
-  report.threads = options.threads > 0 ? options.threads
-                                       : tbb::this_task_arena::max_concurrency();
+  report.solver = options.solver;
+  if (FitOutputs* o = options.outputs) {
+    const auto px = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+    o->residual_map =
+        o->want_residual_map ? Image(width, height, 1, ColourSpace::kLinear) : Image();
+    o->outlier_counts =
+        o->want_outlier_counts ? Image(width, height, 2, ColourSpace::kLinear) : Image();
+    o->labels.assign(o->want_labels ? px * static_cast<std::size_t>(design.lights()) : 0, 0);
+    o->normals = o->want_normals ? Image(width, height, 3, ColourSpace::kLinear) : Image();
+    o->albedo = o->want_normals ? Image(width, height, 3, colour_space) : Image();
+  }
+  report.threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
 
-  BandFitter fitter(design, options, width, channels);
+  BandFitter fitter(design, options, width, height, channels);
   StatsTotal totals;
   StackBand bands[2];
   std::vector<float> coeffs, colour;
@@ -281,7 +574,8 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
     group.wait();  // rethrows a decode error
     report.decode_seconds += decode_s;
     for (const auto& rs : row_stats) {
-      if (options.residual_stats) totals.merge(rs);
+      if (rs.active) totals.merge(rs);
+      totals.merge_outliers(rs);
     }
     sink.write_rows(bands[cur].y0, bands[cur].rows, coeffs.data(), colour.data());
     if (options.progress) {
@@ -290,10 +584,29 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
     cur = 1 - cur;
     have = have_next;
   }
-  sink.end();
+  // The caller ends the sink once the images are closed and the bands freed: the sink may
+  // need memory of its own to finish (the .ptm writer encodes the whole file then).
   report.residuals = totals.finish();
+  report.residuals.row_step = residual_row_step(width, height);
+  report.outliers = totals.outliers;
   report.total_seconds = seconds_since(t0);
   return report;
+}
+
+// The design options a solver implies: QR/SVD factorisations, ridge's default weight.
+DesignOptions design_options_for(const FitOptions& options) {
+  DesignOptions d = options.design;
+  if (options.solver == Solver::kQR) d.method = PinvMethod::kQR;
+  if (options.solver == Solver::kSVD) d.method = PinvMethod::kSVD;
+  if (options.solver == Solver::kRidge && d.ridge_lambda == 0.0) d.ridge_lambda = 1e-3;
+  return d;
+}
+
+// Ends the sink and counts its time (writing the file) in the total.
+void finish_sink(CoefficientSink& sink, FitReport* report) {
+  const auto t = Clock::now();
+  sink.end();
+  report->total_seconds += seconds_since(t);
 }
 
 }  // namespace
@@ -305,6 +618,7 @@ std::string FitOptions::validate() const {
   if (!(design.ridge_lambda >= 0.0) || !std::isfinite(design.ridge_lambda)) {
     return "ridge lambda must be a finite number >= 0";
   }
+  if (const auto err = robust.validate(); !err.empty()) return err;
   return {};
 }
 
@@ -312,11 +626,21 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
   if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
   const ThreadLimit limit(options.threads);
   // Check the layout before opening a single image: a bad layout fails fast.
-  const LightDesign design = LightDesign::build(lights.directions(), options.design);
-  StackReader reader(lights.images());
-  const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
-  return run_fit(design, options, reader.width(), reader.height(), reader.channels(),
-                 reader.info().colour_space, source, sink);
+  const LightDesign design = LightDesign::build(lights.directions(), design_options_for(options));
+  FitReport report;
+  {
+    StackReader reader(lights.images());
+    FitOptions run_options = options;
+    if (reader.info().format == PixelFormat::kF32) {
+      // Float files are not clipped at full scale (HDR): no sample is "saturated".
+      run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
+    }
+    const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
+    report = run_fit(design, run_options, reader.width(), reader.height(), reader.channels(),
+                     reader.info().colour_space, source, sink);
+  }  // images closed before the sink finishes
+  finish_sink(sink, &report);
+  return report;
 }
 
 FitReport fit_images(const std::vector<Image>& images,
@@ -329,7 +653,7 @@ FitReport fit_images(const std::vector<Image>& images,
   }
   if (images.empty()) throw Error("fit: no images");
   const ThreadLimit limit(options.threads);
-  const LightDesign design = LightDesign::build(light_dirs, options.design);
+  const LightDesign design = LightDesign::build(light_dirs, design_options_for(options));
   const int w = images[0].width();
   const int h = images[0].height();
   const int src_ch = images[0].channels();
@@ -365,7 +689,9 @@ FitReport fit_images(const std::vector<Image>& images,
     next_row += band->rows;
     return true;
   };
-  return run_fit(design, options, w, h, ch, images[0].colour_space(), source, sink);
+  FitReport report = run_fit(design, options, w, h, ch, images[0].colour_space(), source, sink);
+  finish_sink(sink, &report);
+  return report;
 }
 
 std::string FitReport::to_json() const {
@@ -391,7 +717,14 @@ std::string FitReport::to_json() const {
                          {"mean_abs", residuals.mean_abs_grey},
                          {"p99_abs", residuals.p99_abs_grey},
                          {"max_abs", residuals.max_abs_grey},
-                         {"samples", residuals.samples}};
+                         {"samples", residuals.samples},
+                         {"row_step", residuals.row_step}};
+  j["solver"] = std::string(to_string(solver));
+  j["outliers"] = {{"samples", outliers.samples},
+                   {"shadow", outliers.shadows},
+                   {"highlight", outliers.highlights},
+                   {"fallback_texels", outliers.fallback_texels},
+                   {"ceres_texels", outliers.ceres_texels}};
   j["threads"] = threads;
   j["timings_s"] = {{"decode", decode_seconds},
                     {"fit", fit_seconds},

@@ -10,6 +10,10 @@
 
 namespace ptmkit::fit {
 
+// How the shared pseudo-inverse is computed. Cholesky of A^T A squares the condition number;
+// QR and SVD of A do not (they matter only for badly conditioned layouts, cond(A) > ~1e3).
+enum class PinvMethod { kCholesky, kQR, kSVD };
+
 struct DesignOptions {
   // Refuse a design whose condition number cond(A) (ratio of largest to smallest singular
   // value) exceeds this. cond(A^T A) = cond(A)^2 is what the normal equations see; in double
@@ -20,18 +24,21 @@ struct DesignOptions {
   // ridge_lambda * N * I)^-1 A^T. 0 (default) is the paper's plain fit. About 1e-3 is a
   // common choice; it makes rank-deficient layouts solvable, at the cost of bias.
   double ridge_lambda = 0.0;
+  // Cholesky (default, the seed paper's normal equations), QR or SVD of A. With ridge_lambda
+  // > 0 the augmented system [A; sqrt(lambda N) I] is factored the same way.
+  PinvMethod method = PinvMethod::kCholesky;
 };
 
 // What is known about a light layout before any pixel is read.
 struct DesignReport {
   int lights = 0;
-  double condition_number = 0.0;     // cond(A), from the SVD; inf when rank-deficient
+  double condition_number = 0.0;  // cond(A), from the SVD; inf when rank-deficient
   double smallest_singular = 0.0;
   double largest_singular = 0.0;
   double min_elevation_deg = 0.0;
   double max_elevation_deg = 0.0;
-  bool single_ring = false;          // every light at the same elevation
-  bool regularised = false;          // ridge_lambda > 0 was applied
+  bool single_ring = false;  // every light at the same elevation
+  bool regularised = false;  // ridge_lambda > 0 was applied
   // Empty when the design can be fitted; otherwise why not and what would fix it.
   std::string problem;
 };
@@ -53,7 +60,7 @@ class LightDesign {
   // N x 6, rows are ptm_basis(lu_i, lv_i).
   [[nodiscard]] const Eigen::MatrixXd& design() const { return design_; }
   // 6 x N: (A^T A + lambda N I)^-1 A^T, built in double by Cholesky of the normal matrix
-  // (the seed paper's normal equations).
+  // (the seed paper's normal equations), or by QR or SVD of A (DesignOptions::method).
   [[nodiscard]] const Eigen::MatrixXd& pseudo_inverse() const { return pinv_; }
   [[nodiscard]] const Eigen::MatrixXf& pseudo_inverse_f() const { return pinv_f_; }
 

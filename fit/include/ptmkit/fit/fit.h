@@ -2,10 +2,12 @@
 //
 // The stack is read in bands of rows (all images at once, decoded in parallel) and each band
 // is fitted while the next one decodes, so memory stays at two bands plus what the sink keeps,
-// never the whole decoded stack. Every texel is fitted with the same pseudo-inverse (see
-// design.h); results are identical whatever the thread count.
+// never the whole decoded stack. The least-squares solvers fit every texel with the same
+// pseudo-inverse (see design.h); the robust ones label and weight each texel's samples first
+// (see robust.h). Results are identical whatever the thread count.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -14,12 +16,35 @@
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
 #include "ptmkit/fit/design.h"
+#include "ptmkit/fit/robust.h"
 
 namespace ptmkit::fit {
 
 enum class Precision {
   kFloat,   // pseudo-inverse applied in float: 2x the speed; error ~1e-6 of full scale
   kDouble,  // everything in double (for exactness checks)
+};
+
+// Per-texel maps a fit can fill on request (FitOptions::outputs). Each is produced only when
+// its want_ flag is set; sizes are the capture's.
+struct FitOutputs {
+  bool want_residual_map = false;
+  bool want_outlier_counts = false;
+  bool want_labels = false;
+  bool want_normals = false;
+  // 1 channel: RMS residual of the fit over the texel's inlier samples and all fitted
+  // channels, in grey levels (1/255 of full scale).
+  Image residual_map;
+  // 2 channels: number of samples labelled shadow, highlight.
+  Image outlier_counts;
+  // [y][x][light] SampleLabel codes (0 inlier, 1 shadow, 2 highlight), row-major texels.
+  std::vector<std::uint8_t> labels;
+  // 3 channels: unit normals (x, y, z in the light frame) by Lambertian photometric stereo
+  // on the labelling channel over the inlier samples (all samples for least-squares solvers);
+  // (0, 0, 1) where the system is singular.
+  Image normals;
+  // 3 channels: per-channel Lambertian albedo with those normals (grey input: three equal).
+  Image albedo;
 };
 
 struct FitOptions {
@@ -30,25 +55,44 @@ struct FitOptions {
   Precision precision = Precision::kFloat;
   // Worker threads; 0 = all cores. Results do not depend on it.
   int threads = 0;
-  // Rows per band. Memory is about 2 * band_rows * width * channels * lights * 4 bytes.
-  int band_rows = 16;
+  // Rows per band. Memory is about 2 * band_rows * width * channels * lights * 4 bytes
+  // (two bands: one fitted while the next decodes): 38 MB for 49 lights at 4000 px wide.
+  int band_rows = 8;
   // Compute residual statistics (costs about as much as the fit itself).
   bool residual_stats = true;
   // Called with the fraction done after each band.
   ProgressFn progress;
+  // Per-texel solver. kLS (default) is the shared pseudo-inverse by Cholesky; kQR and kSVD
+  // build it by QR or SVD of A; kRidge uses design.ridge_lambda, or 1e-3 if that is 0. The
+  // others label each texel's samples (robust.h) and cost microseconds per texel.
+  Solver solver = Solver::kLS;
+  RobustOptions robust;
+  // Optional per-texel maps (not owned; filled when non-null).
+  FitOutputs* outputs = nullptr;
 
   // Empty if valid, else what is wrong.
   [[nodiscard]] std::string validate() const;
 };
 
 // Residuals of the fit against its own input samples, in 8-bit grey levels (1/255 of full
-// scale), over every sample of every channel.
+// scale), over every sample of every channel of the rows sampled: every row up to about a
+// million texels, every row_step-th row above (a fixed choice, so reports are reproducible).
 struct ResidualStats {
   double rms_grey = 0.0;
   double mean_abs_grey = 0.0;
   double p99_abs_grey = 0.0;  // from a 0.05-grey-level histogram
   double max_abs_grey = 0.0;
   std::uint64_t samples = 0;
+  int row_step = 1;
+};
+
+// Labels over the whole fit (robust solvers; zero for the least-squares ones).
+struct OutlierSummary {
+  std::uint64_t samples = 0;          // texels x lights
+  std::uint64_t shadows = 0;          // samples labelled shadow
+  std::uint64_t highlights = 0;       // samples labelled highlight
+  std::uint64_t fallback_texels = 0;  // texels that kept an earlier fit (too few inliers)
+  std::uint64_t ceres_texels = 0;     // texels on which Ceres ran
 };
 
 struct FitReport {
@@ -60,6 +104,8 @@ struct FitReport {
   ColourSpace colour_space = ColourSpace::kSRGB;
   DesignReport design;
   ResidualStats residuals;
+  Solver solver = Solver::kLS;
+  OutlierSummary outliers;
   int threads = 0;
   // Wall-clock seconds. Decoding and fitting overlap, so decode + fit can exceed total.
   double decode_seconds = 0.0;  // summed over bands

@@ -1,0 +1,85 @@
+// Robust solvers against the synth presets' ground truth.
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include <gtest/gtest.h>
+
+#include "robust_util.h"
+
+namespace ptmkit::fit {
+namespace {
+
+// Prints the solver table on every preset at $PTMKIT_ROBUST_TABLE pixels (measurement aid for
+// docs/SOLVERS.md; skipped unless set).
+TEST(RobustTable, PrintsEverySolverOnEveryPreset) {
+  const char* env = std::getenv("PTMKIT_ROBUST_TABLE");
+  if (env == nullptr) GTEST_SKIP() << "set PTMKIT_ROBUST_TABLE=SIZE to print the table";
+  const int size = std::atoi(env);
+  const char* solvers_env = std::getenv("PTMKIT_ROBUST_SOLVERS");
+  const std::string list = solvers_env ? solvers_env : "ls,irls-huber,irls-tukey,trim,sign";
+  for (const char* preset : {"default", "matte", "glossy", "tall", "ambient"}) {
+    const auto stack = test::render_preset(preset, size);
+    {
+      // Oracle: weighted least squares on the truly good samples (lit, within 20 grey levels).
+      const LightDesign design = LightDesign::build(stack.dirs);
+      TexelSolver ts(design.design(), Solver::kSign, RobustOptions{});
+      CoefficientMap map(size, size, ColourModel::kRGB, ColourSpace::kLinear);
+      const std::size_t n = stack.dirs.size();
+      std::vector<double> w(n), v(n);
+      std::uint64_t below = 0, above = 0;
+      for (int y = 0; y < size; ++y)
+        for (int x = 0; x < size; ++x) {
+          for (std::size_t i = 0; i < n; ++i) {
+            const bool lit = is_lit(stack.scene.normals, x, y, stack.dirs[i]);
+            double d = 0;
+            for (int c = 0; c < 3; ++c)
+              d += (stack.observed[i].at(x, y, c) - stack.diffuse[i].at(x, y, c)) / 3;
+            w[i] = lit && std::abs(d) * 255 <= 20 ? 1.0 : 0.0;
+            below += d * 255 < -20;
+            above += d * 255 > 20;
+          }
+          for (int c = 0; c < 3; ++c) {
+            for (std::size_t i = 0; i < n; ++i) v[i] = stack.observed[i].at(x, y, c);
+            double cc[6];
+            ts.weighted_fit(v.data(), w.data(), cc);
+            for (int t = 0; t < 6; ++t)
+              map.texel_coeffs(x, y)[c * 6 + t] = static_cast<float>(cc[t]);
+          }
+        }
+      std::printf("%-8s oracle psnr %6.2f   true outliers below %llu above %llu\n", preset,
+                  psnr_against_truth(map, stack.dirs, stack.diffuse, stack.scene.normals).psnr_db,
+                  static_cast<unsigned long long>(below), static_cast<unsigned long long>(above));
+    }
+    double ls_psnr = 0.0;
+    std::size_t a = 0;
+    while (a <= list.size()) {
+      std::size_t b = list.find(',', a);
+      if (b == std::string::npos) b = list.size();
+      const Solver s = parse_solver(list.substr(a, b - a));
+      a = b + 1;
+      RobustOptions ro;
+      auto envd = [](const char* k, double d) {
+        const char* v = std::getenv(k);
+        return v ? std::atof(v) : d;
+      };
+      ro.highlight_k = envd("RK_HI", ro.highlight_k);
+      ro.shadow_k = envd("RK_SH", ro.shadow_k);
+      ro.min_scale = envd("RK_MS", ro.min_scale * 255) / 255;
+      ro.dark_fraction = envd("RK_DF", ro.dark_fraction);
+      ro.max_iterations = static_cast<int>(envd("RK_IT", ro.max_iterations));
+      ro.min_inliers = static_cast<int>(envd("RK_MI", ro.min_inliers));
+      const auto r = test::score_solver(stack, s, ro);
+      if (s == Solver::kLS) ls_psnr = r.psnr_db;
+      std::printf(
+          "%-8s %-12s psnr %6.2f (%+5.2f)  P/R all %.3f/%.3f  lit %.3f/%.3f  normals %5.2f deg  "
+          "%.2f us/texel\n",
+          preset, std::string(to_string(s)).c_str(), r.psnr_db, r.psnr_db - ls_psnr,
+          r.outliers_all.precision, r.outliers_all.recall, r.outliers_lit.precision,
+          r.outliers_lit.recall, r.normals.mean_deg, 1e6 * r.report.fit_seconds / (size * size));
+    }
+  }
+}
+
+}  // namespace
+}  // namespace ptmkit::fit

@@ -1,0 +1,68 @@
+// Synthetic stacks rendered in memory and scored against their truth, for the robust tests.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "ptmkit/fit/evaluate.h"
+#include "ptmkit/fit/fit.h"
+#include "ptmkit/synth/synth.h"
+
+namespace ptmkit::test {
+
+struct SynthStack {
+  synth::Scene scene;
+  std::vector<Eigen::Vector3d> dirs;
+  std::vector<Image> observed;
+  std::vector<Image> diffuse;
+};
+
+// A preset rendered at size x size (the relief scales with the width).
+inline SynthStack render_preset(const std::string& preset, int size) {
+  synth::SynthOptions o = synth::preset_options(preset);
+  o.width = size;
+  o.height = size;
+  o.write_truth = false;
+  SynthStack s;
+  s.scene = synth::build_scene(o);
+  s.dirs = synth::resolve_lights(o);
+  for (std::size_t i = 0; i < s.dirs.size(); ++i) {
+    synth::RenderedLight r = synth::render_light(s.scene, o, s.dirs[i], static_cast<int>(i));
+    s.observed.push_back(std::move(r.observed));
+    s.diffuse.push_back(std::move(r.diffuse));
+  }
+  return s;
+}
+
+struct SolverScores {
+  double psnr_db = 0.0;
+  fit::OutlierScores outliers_all;
+  fit::OutlierScores outliers_lit;
+  fit::NormalError normals;
+  fit::FitReport report;
+};
+
+inline SolverScores score_solver(const SynthStack& s, fit::Solver solver,
+                                 const fit::RobustOptions& robust = {}) {
+  fit::FitOptions o;
+  o.solver = solver;
+  o.robust = robust;
+  o.residual_stats = false;
+  fit::FitOutputs out;
+  out.want_labels = true;
+  out.want_normals = true;
+  o.outputs = &out;
+  CoefficientMap map;
+  CoefficientMapSink sink(&map);
+  SolverScores r;
+  r.report = fit::fit_images(s.observed, s.dirs, o, sink);
+  r.psnr_db = fit::psnr_against_truth(map, s.dirs, s.diffuse, s.scene.normals).psnr_db;
+  r.outliers_all =
+      fit::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, false);
+  r.outliers_lit =
+      fit::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, true);
+  r.normals = fit::normal_error(out.normals, s.scene.normals);
+  return r;
+}
+
+}  // namespace ptmkit::test
