@@ -12,7 +12,9 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/texture/integer_model.h"
 #include "ptmkit/texture/ptm.h"
+#include "ptmkit/texture/ptm8.h"
 #include "ptmkit/texture/relight.h"
 
 namespace fs = std::filesystem;
@@ -32,6 +34,7 @@ struct RelightArgs {
   std::string colour_space = "srgb";
   int bits = 8;
   bool no_clamp = false;
+  bool integer = false;
 };
 
 // "x,y,z" -> vector. NaN and infinity parse (and are rejected by the library with the rest).
@@ -69,6 +72,9 @@ void run_relight(const RelightArgs& args) {
   if (one && (!args.out_dir.empty() || !args.report.empty() || !args.mask.empty())) {
     throw CLI::ValidationError("relight", "--out-dir, --report and --mask go with --lights");
   }
+  if (args.integer && (!one || args.no_clamp)) {
+    throw CLI::ValidationError("relight", "--integer goes with --light and without --no-clamp");
+  }
   ColourSpace space = ColourSpace::kSRGB;
   if (args.colour_space == "linear") {
     space = ColourSpace::kLinear;
@@ -92,6 +98,17 @@ void run_relight(const RelightArgs& args) {
       std::fprintf(stderr,
                    "ptmkit: warning: the light is at or below the horizon (z <= 0): "
                    "the image is black\n");
+    }
+    if (args.integer) {
+      const texture::Ptm8Texture t = texture::quantise_ptm8(map);
+      const Image image = texture::relight_integer(t, dir);
+      write_image(args.output, image.view(), write);
+      std::printf(
+          "relit %s (%d x %d) from (%.4f, %.4f, %.4f) with the integer model (shifts "
+          "high %d, mid %d, low %d): wrote %s\n",
+          args.input.c_str(), map.width, map.height, dir.x(), dir.y(), dir.z(), t.shifts[0],
+          t.shifts[1], t.shifts[2], args.output.c_str());
+      return;
     }
     const Image image = texture::relight(map, dir, relight_options);
     write_image(args.output, image.view(), write);
@@ -153,6 +170,9 @@ void add_relight_command(CLI::App& root) {
       ->capture_default_str();
   cmd->add_flag("--no-clamp", args->no_clamp,
                 "Keep values outside [0, 1] (only useful with .exr output)");
+  cmd->add_flag("--integer", args->integer,
+                "Re-quantise into the seed paper's 8-bit scheme (three shifts, bias 127) and "
+                "evaluate with the integer hardware model of docs/INTEGER-MODEL.md (with --light)");
   cmd->callback([args] { run_relight(*args); });
 }
 

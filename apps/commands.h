@@ -11,5 +11,7 @@ void add_synth_command(CLI::App& root);
 void add_fit_command(CLI::App& root);
 void add_relight_command(CLI::App& root);
 void add_info_command(CLI::App& root);
+void add_render_command(CLI::App& root);
+void add_direct_command(CLI::App& root);
 
 }  // namespace ptmkit::app

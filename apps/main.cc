@@ -24,6 +24,8 @@ int main(int argc, char** argv) {
   ptmkit::app::add_fit_command(app);
   ptmkit::app::add_relight_command(app);
   ptmkit::app::add_info_command(app);
+  ptmkit::app::add_render_command(app);
+  ptmkit::app::add_direct_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
