@@ -30,6 +30,8 @@ struct FitArgs {
   std::string residual_map;
   std::string outlier_map;
   std::string normals;
+  std::string albedo;
+  std::string labels;
   fit::FitOptions options;
 };
 
@@ -57,11 +59,17 @@ void run_fit(const FitArgs& args) {
   check_map_path(args.residual_map, "--residual-map", false);
   check_map_path(args.outlier_map, "--outlier-map", false);
   check_map_path(args.normals, "--normals", true);
+  check_map_path(args.albedo, "--albedo", true);
+  if (!args.labels.empty() && fs::exists(args.labels) && !fs::is_directory(args.labels)) {
+    throw Error(args.labels + ": --labels must be a folder");
+  }
   fit::FitOutputs outputs;
   outputs.want_residual_map = !args.residual_map.empty();
   outputs.want_outlier_counts = !args.outlier_map.empty();
-  outputs.want_normals = !args.normals.empty();
-  if (outputs.want_residual_map || outputs.want_outlier_counts || outputs.want_normals) {
+  outputs.want_normals = !args.normals.empty() || !args.albedo.empty();
+  outputs.want_labels = !args.labels.empty();
+  if (outputs.want_residual_map || outputs.want_outlier_counts || outputs.want_normals ||
+      outputs.want_labels) {
     options.outputs = &outputs;
   }
   options.progress = make_progress("fit");
@@ -73,7 +81,29 @@ void run_fit(const FitArgs& args) {
   if (outputs.want_outlier_counts) {
     write_image(args.outlier_map, outputs.outlier_counts.view(), exr);
   }
-  if (outputs.want_normals) {
+  if (!args.albedo.empty()) {
+    const bool png = fs::path(args.albedo).extension() == ".png";
+    write_image(args.albedo, outputs.albedo.view(),
+                ImageWriteOptions{png ? PixelFormat::kU16 : PixelFormat::kF32});
+  }
+  if (outputs.want_labels) {
+    // One 8-bit image per light, named after its photograph, codes as `ptmkit synth`'s
+    // truth/labels (0 inlier, 1 shadow, 2 highlight).
+    ensure_directory(args.labels);
+    const std::size_t n = lights.size();
+    Image lab(report.width, report.height, 1, ColourSpace::kLinear);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int y = 0; y < report.height; ++y) {
+        for (int x = 0; x < report.width; ++x) {
+          const std::size_t texel = static_cast<std::size_t>(y) * report.width + x;
+          lab.at(x, y, 0) = static_cast<float>(outputs.labels[texel * n + i]) / 255.0f;
+        }
+      }
+      const fs::path name = lights.lights[i].image.filename().replace_extension(".png");
+      write_image(fs::path(args.labels) / name, lab.view(), ImageWriteOptions{PixelFormat::kU8});
+    }
+  }
+  if (!args.normals.empty()) {
     if (fs::path(args.normals).extension() == ".png") {
       Image enc = outputs.normals;  // (n + 1) / 2 in 16 bits
       for (std::size_t i = 0; i < enc.size(); ++i) enc.data()[i] = 0.5f * (enc.data()[i] + 1.0f);
@@ -189,6 +219,13 @@ void add_fit_command(CLI::App& root) {
                   "Write Lambertian photometric-stereo normals from the inlier samples: .exr "
                   "(float xyz) or .png (16-bit, (n + 1) / 2); R, G, B = x, y, z in the light "
                   "file's frame");
+  cmd->add_option("--albedo", args->albedo,
+                  "Write the per-channel Lambertian albedo (with the --normals model, inlier "
+                  "samples): .exr (float) or .png (16-bit)");
+  cmd->add_option("--labels", args->labels,
+                  "Write each sample's label into this folder: one 8-bit PNG per light, named "
+                  "after its photograph, 0 inlier, 1 shadow, 2 highlight (the codes of `ptmkit "
+                  "synth`'s truth/labels; all 0 for least-squares solvers)");
   cmd->add_flag("!--no-residuals", args->options.residual_stats,
                 "Skip the residual statistics (saves about half the fit arithmetic)");
   cmd->callback([args] { run_fit(*args); });

@@ -13,5 +13,6 @@ void add_relight_command(CLI::App& root);
 void add_info_command(CLI::App& root);
 void add_render_command(CLI::App& root);
 void add_direct_command(CLI::App& root);
+void add_compare_command(CLI::App& root);
 
 }  // namespace ptmkit::app

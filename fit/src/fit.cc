@@ -105,11 +105,12 @@ int residual_row_step(int width, int height) {
 class BandFitter {
  public:
   BandFitter(const LightDesign& design, const FitOptions& options, int width, int height,
-             int channels)
+             int channels, ColourSpace colour_space)
       : design_(design),
         options_(options),
         width_(width),
         channels_(channels),
+        srgb_(colour_space == ColourSpace::kSRGB),
         residual_row_step_(residual_row_step(width, height)) {
     a_f_ = design.design().cast<float>();
     const auto n = design.design().rows();
@@ -365,7 +366,7 @@ class BandFitter {
         if (w <= 0.0) continue;
         const Eigen::Vector3d l = light_.row(i).transpose();
         m.noalias() += w * l * l.transpose();
-        rhs += (w * value[i]) * l;
+        rhs += (w * (srgb_ ? srgb_to_linear(value[i]) : value[i])) * l;
       }
       Eigen::Vector3d nrm(0.0, 0.0, 1.0);
       const Eigen::LDLT<Eigen::Matrix3d> ldlt(m);
@@ -380,8 +381,10 @@ class BandFitter {
         if (w <= 0.0) continue;
         const double shade = std::max(0.0, light_.row(i).dot(nrm));
         den += w * shade * shade;
-        for (int k = 0; k < 3; ++k)
-          num[k] += w * shade * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+        for (int k = 0; k < 3; ++k) {
+          const double v = s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+          num[k] += w * shade * (srgb_ ? srgb_to_linear(v) : v);
+        }
       }
       for (int k = 0; k < 3; ++k) {
         o.normals.at(x, y, k) = static_cast<float>(nrm(k));
@@ -508,6 +511,9 @@ class BandFitter {
   const FitOptions& options_;
   int width_;
   int channels_;
+  // sRGB-encoded input: photometric stereo linearises first (Lambert's law holds for
+  // radiance, not for the encoded values the polynomial is fitted to).
+  bool srgb_ = false;
   int residual_row_step_;
   Eigen::MatrixXf a_f_;
   Eigen::MatrixX3d light_;  // unit light directions (for normals)
@@ -538,11 +544,11 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
         o->want_outlier_counts ? Image(width, height, 2, ColourSpace::kLinear) : Image();
     o->labels.assign(o->want_labels ? px * static_cast<std::size_t>(design.lights()) : 0, 0);
     o->normals = o->want_normals ? Image(width, height, 3, ColourSpace::kLinear) : Image();
-    o->albedo = o->want_normals ? Image(width, height, 3, colour_space) : Image();
+    o->albedo = o->want_normals ? Image(width, height, 3, ColourSpace::kLinear) : Image();
   }
   report.threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
 
-  BandFitter fitter(design, options, width, height, channels);
+  BandFitter fitter(design, options, width, height, channels, colour_space);
   StatsTotal totals;
   StackBand bands[2];
   std::vector<float> coeffs, colour;
@@ -713,12 +719,9 @@ std::string FitReport::to_json() const {
                  {"max_elevation_deg", design.max_elevation_deg},
                  {"single_ring", design.single_ring},
                  {"regularised", design.regularised}};
-  j["residuals_grey"] = {{"rms", residuals.rms_grey},
-                         {"mean_abs", residuals.mean_abs_grey},
-                         {"p99_abs", residuals.p99_abs_grey},
-                         {"max_abs", residuals.max_abs_grey},
-                         {"samples", residuals.samples},
-                         {"row_step", residuals.row_step}};
+  j["residuals_grey"] = {{"rms", residuals.rms_grey},         {"mean_abs", residuals.mean_abs_grey},
+                         {"p99_abs", residuals.p99_abs_grey}, {"max_abs", residuals.max_abs_grey},
+                         {"samples", residuals.samples},      {"row_step", residuals.row_step}};
   j["solver"] = std::string(to_string(solver));
   j["outliers"] = {{"samples", outliers.samples},
                    {"shadow", outliers.shadows},

@@ -59,6 +59,7 @@ class SampleCost final : public ceres::SizedCostFunction<1, kPtmTerms> {
   const double* value_;
 };
 
+// Exact median (mean of the two middle values for an even count). Reorders v.
 double median_of(std::vector<double>& v) {
   if (v.empty()) return 0.0;
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
@@ -131,6 +132,7 @@ struct TexelSolver::Impl {
   // Scratch.
   std::vector<double> resid, scratch, value_copy;
   std::vector<SampleLabel> trial;
+  std::vector<double> trial_weights;
   std::vector<std::uint8_t> hard;  // label fixed by trimming
   // Cached factorisation of the last weighted system.
   std::vector<double> llt_weights;
@@ -284,7 +286,7 @@ struct TexelSolver::Impl {
           out.fallback = true;
           break;
         }
-        std::vector<double> w(static_cast<std::size_t>(n));
+        std::vector<double>& w = trial_weights;
         to_weights(trial.data(), n, w.data());
         if (solver == Solver::kLambert) {
           // The polynomial is fitted once, after the labels settle.
@@ -354,7 +356,7 @@ struct TexelSolver::Impl {
     const double k = solver == Solver::kIrlsHuber ? opt.huber_k : opt.tukey_k;
     *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
     std::fill(weights, weights + n, 1.0);
-    std::vector<double> w(static_cast<std::size_t>(n));
+    std::vector<double>& w = trial_weights;
     double s = 0.0;
     for (int it = 0; it < opt.max_iterations; ++it) {
       out.iterations = it + 1;
@@ -500,6 +502,7 @@ TexelSolver::TexelSolver(const Eigen::MatrixXd& design, Solver solver, const Rob
   impl_->pinv = normal.ldlt().solve(design.transpose());
   impl_->resid.assign(n, 0.0);
   impl_->trial.assign(n, SampleLabel::kInlier);
+  impl_->trial_weights.assign(n, 0.0);
   impl_->hard.assign(n, 0);
   impl_->scratch.reserve(n);
 }

@@ -41,9 +41,10 @@ struct FitOutputs {
   std::vector<std::uint8_t> labels;
   // 3 channels: unit normals (x, y, z in the light frame) by Lambertian photometric stereo
   // on the labelling channel over the inlier samples (all samples for least-squares solvers);
-  // (0, 0, 1) where the system is singular.
+  // (0, 0, 1) where the system is singular. sRGB-encoded input is linearised first.
   Image normals;
-  // 3 channels: per-channel Lambertian albedo with those normals (grey input: three equal).
+  // 3 channels: per-channel Lambertian albedo with those normals, linear (grey input: three
+  // equal).
   Image albedo;
 };
 

@@ -1,0 +1,142 @@
+// `ptmkit compare` and fit::compare_solvers on small synthetic captures.
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/fit/compare.h"
+#include "ptmkit/synth/synth.h"
+#include "test_util.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit::fit {
+namespace {
+
+using test::list_files;
+using test::run_ptmkit;
+using test::ScratchDir;
+
+// Rendering noise is 1 grey level; the 6-term polynomial's own misfit on a relief is a few
+// grey levels, so held-out PSNR sits in the 20s-30s dB: anything outside 15..50 dB is a bug.
+constexpr double kMinSanePsnrDb = 15.0;
+constexpr double kMaxSanePsnrDb = 50.0;
+
+fs::path render(const fs::path& dir, const std::string& lights, int size = 32) {
+  synth::SynthOptions o = synth::preset_options("default");
+  o.width = size;
+  o.height = size;
+  o.lights = lights;
+  return synth::render_capture(o, dir).lp_file;
+}
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(CompareLibrary, FoldsAndTruthGiveSaneNumbers) {
+  ScratchDir dir;
+  const fs::path lp = render(dir / "cap", "dome49");
+  CompareOptions o;
+  o.solvers = {Solver::kLS, Solver::kRobust};
+  o.folds = 4;
+  o.threads = 2;
+  const CompareReport r = compare_solvers(lp, std::nullopt, o);
+  ASSERT_EQ(r.results.size(), 2u);
+  EXPECT_TRUE(r.has_truth);
+  EXPECT_TRUE(r.has_normals);
+  EXPECT_EQ(r.folds, 4);
+  EXPECT_EQ(r.lights, 49);
+  EXPECT_EQ(r.width, 32);
+  for (const auto& s : r.results) {
+    EXPECT_GT(s.heldout_psnr_db, kMinSanePsnrDb) << to_string(s.solver);
+    EXPECT_LT(s.heldout_psnr_db, kMaxSanePsnrDb) << to_string(s.solver);
+    EXPECT_GT(s.heldout_ssim, 0.0);
+    EXPECT_LE(s.heldout_ssim, 1.0);
+    // Every light held out once: texels x lights x 3 channels.
+    EXPECT_EQ(s.heldout_samples, 32u * 32u * 49u * 3u);
+    EXPECT_GT(s.us_per_texel, 0.0);
+    EXPECT_GT(s.truth_psnr_db, kMinSanePsnrDb);
+    EXPECT_GT(s.normals.texels, 0u);
+  }
+  const SolverResult& ls = r.results[0];
+  const SolverResult& robust = r.results[1];
+  // The robust default rejects shadows and highlights: closer to the diffuse truth and
+  // better normals than least squares (issue 4 targets; measured margins are 2 dB and 3x).
+  EXPECT_GT(robust.truth_psnr_db, ls.truth_psnr_db + 1.0);
+  EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg);
+  EXPECT_EQ(ls.shadow_fraction + ls.highlight_fraction, 0.0);
+  EXPECT_GT(robust.shadow_fraction, 0.0);
+  // With two solvers, at least one is on the Pareto front; ls is, unless robust beats it on
+  // both axes (it cannot be faster).
+  EXPECT_TRUE(ls.pareto);
+  EXPECT_TRUE(robust.pareto);  // more accurate than ls
+}
+
+TEST(CompareCli, WritesTableCsvJsonAndPlotWithATestSet) {
+  ScratchDir dir;
+  const fs::path lp = render(dir / "cap", "dome49");
+  const fs::path test = render(dir / "test", "rings:20:6:15,60:4:40");
+  const fs::path out = dir / "out";
+  const auto r = run_ptmkit({"compare", lp.string(), "--test", test.string(), "--solvers",
+                             "ls,sign", "--threads", "2", "-o", out.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("10 test lights"), std::string::npos) << r.out;
+  EXPECT_EQ(list_files(out),
+            (std::vector<std::string>{"plot.png", "results.csv", "results.json", "table.md"}));
+  const auto j = nlohmann::json::parse(read_text(out / "results.json"));
+  EXPECT_EQ(j["test_lights"], 10);
+  EXPECT_EQ(j["folds"], 0);
+  ASSERT_EQ(j["results"].size(), 2u);
+  EXPECT_EQ(j["results"][1]["solver"], "sign");
+  const double psnr = j["results"][0]["heldout_psnr_db"];
+  EXPECT_GT(psnr, kMinSanePsnrDb);
+  EXPECT_LT(psnr, kMaxSanePsnrDb);
+  const std::string csv = read_text(out / "results.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3);
+  // Header, separator and one row per solver (Pareto rows are in bold).
+  const std::string md = read_text(out / "table.md");
+  EXPECT_NE(md.find("sign"), std::string::npos);
+  std::size_t rows = 0;
+  for (std::size_t p = md.find("\n|"); p != std::string::npos; p = md.find("\n|", p + 1)) ++rows;
+  EXPECT_EQ(rows, 4u) << md;
+  const ImageInfo plot = probe_image(out / "plot.png");
+  EXPECT_EQ(plot.width, 800);
+  EXPECT_EQ(plot.channels, 3);
+}
+
+TEST(CompareCli, BadInputsExitOneAndWriteNothing) {
+  ScratchDir dir;
+  const fs::path lp = render(dir / "cap", "rings:30:6,60:4");
+  const fs::path small = render(dir / "small", "rings:30:6,60:4", 16);
+  const fs::path out = dir / "out";
+  struct Case {
+    std::vector<std::string> args;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {{"compare", (dir / "missing.lp").string(), "-o", out.string()}, "missing.lp"},
+      {{"compare", lp.string(), "--solvers", "ls,nope", "-o", out.string()}, "nope"},
+      {{"compare", lp.string(), "--solvers", "ls,ls", "-o", out.string()}, "twice"},
+      {{"compare", lp.string(), "--folds", "11", "-o", out.string()}, "only 10 lights"},
+      // A fold of a 2-ring layout leaves a training set that is still fittable, but 5 folds
+      // of 10 lights leave 8: fine; a test set of another size is not.
+      {{"compare", lp.string(), "--test", small.string(), "-o", out.string()}, "16x16"},
+  };
+  for (const auto& c : cases) {
+    const auto r = run_ptmkit(c.args);
+    EXPECT_EQ(r.exit_code, 1) << c.message << ": " << r.out;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out)) << c.message;
+  }
+}
+
+}  // namespace
+}  // namespace ptmkit::fit
