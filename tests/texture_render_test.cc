@@ -147,5 +147,25 @@ TEST(TextureRender, LightBehindTheSurfaceIsBlackAndShapesRender) {
   }
 }
 
+// A YCC texture (one luminance polynomial, constant chroma) renders exactly as its RGB form
+// through every filter, including the summed-area path, whose table holds the RGB form.
+TEST(TextureRender, YccTextureRendersAsItsRgbFormThroughEveryFilter) {
+  const CoefficientMap ycc = to_luminance_polynomial(random_map(16, 16, test::test_seed()));
+  ASSERT_EQ(ycc.model, ColourModel::kYCC);
+  const CoefficientMap rgb = to_rgb_polynomials(ycc);
+  for (RenderFilter f : {RenderFilter::kSat, RenderFilter::kTrilinear, RenderFilter::kAuto}) {
+    RenderOptions o;
+    o.geometry = Geometry::kPlane;
+    o.camera.width = o.camera.height = 24;
+    o.camera.position = {0.0, -2.0, 0.6};  // grazing: anisotropic footprints
+    o.camera.fov_y_deg = 40.0;
+    o.filter = f;
+    o.light_dir = {0.3, 0.2, 1.0};
+    const Image a = render_texture(ycc, o);
+    const Image b = render_texture(rgb, o);
+    for (std::size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a.data()[i], b.data()[i], 1e-5) << i;
+  }
+}
+
 }  // namespace
 }  // namespace ptmkit::texture

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <limits>
 #include <numbers>
 #include <string>
@@ -130,8 +131,10 @@ Image render_texture(const CoefficientMap& input, const RenderOptions& o, Render
             : 0.5 * cam.height / std::tan(0.5 * cam.fov_y_deg * std::numbers::pi / 180.0);
 
   // The texture, its pyramid, its bytes and their summed-area table.
-  CoefficientMap map =
-      o.shading == RenderShading::kLuminance ? to_luminance_polynomial(input) : input;
+  // YCC is held as its exact RGB form (the polynomials differ only in a5), as the 8-bit
+  // storage holds it, so the pyramid and the summed-area table agree texel for texel.
+  CoefficientMap map = to_rgb_polynomials(
+      o.shading == RenderShading::kLuminance ? to_luminance_polynomial(input) : input);
   Ptm8Texture bytes;
   if (o.integer) {
     bytes = quantise_ptm8(map);
@@ -143,6 +146,9 @@ Image render_texture(const CoefficientMap& input, const RenderOptions& o, Render
   const SummedAreaTable sat = want_sat ? SummedAreaTable(sat_bytes) : SummedAreaTable();
   const ColourModel model = map.model;
   const int nvals = pyramid.values_per_texel();
+  if (want_sat && sat.channels() != nvals) {
+    throw std::logic_error("render: summed-area table and pyramid disagree on values per texel");
+  }
   const int tw = map.width, th = map.height;
 
   // Tessellate and project.
