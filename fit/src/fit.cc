@@ -101,6 +101,28 @@ int residual_row_step(int width, int height) {
   return std::max(1, static_cast<int>(std::ceil(texels / kResidualSampleTexels)));
 }
 
+// LRGB colour from the sums yy = sum w Y^2 and yc = sum w Y rgb: the least-squares colour
+// k_c = yc / yy, scaled so its largest channel is 1, the luminance polynomial carrying the scale.
+void finish_lrgb_colour(double yy, const double yc[3], float* colour, float* coeffs) {
+  double k[3] = {1.0, 1.0, 1.0};
+  if (yy > 1e-20) {
+    for (int c = 0; c < 3; ++c) k[c] = std::max(0.0, yc[c] / yy);
+  }
+  double m = std::max({k[0], k[1], k[2]});
+  if (m <= 1e-12) {
+    k[0] = k[1] = k[2] = 1.0;
+    m = 1.0;
+  }
+  for (int c = 0; c < 3; ++c) colour[c] = static_cast<float>(k[c] / m);
+  for (int t = 0; t < kPtmTerms; ++t) coeffs[t] = static_cast<float>(coeffs[t] * m);
+}
+
+// The seed paper's constant chromaticity from luminance-weighted sums of Cb and Cr.
+void finish_ycc_chroma(double sy, double scb, double scr, float* colour) {
+  colour[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
+  colour[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
+}
+
 // Fits one band. Output buffers: coeffs [texel][poly][term], colour [texel][colours].
 class BandFitter {
  public:
@@ -220,17 +242,7 @@ class BandFitter {
           yy += yi * yi;
           for (int c = 0; c < 3; ++c) yc[c] += yi * samples(i, ch == 3 ? 3 * x + c : x);
         }
-        double k[3] = {1.0, 1.0, 1.0};
-        if (yy > 1e-20) {
-          for (int c = 0; c < 3; ++c) k[c] = std::max(0.0, yc[c] / yy);
-        }
-        double m = std::max({k[0], k[1], k[2]});
-        if (m <= 1e-12) {
-          k[0] = k[1] = k[2] = 1.0;
-          m = 1.0;
-        }
-        for (int c = 0; c < 3; ++c) col[c] = static_cast<float>(k[c] / m);
-        for (int t = 0; t < kPtmTerms; ++t) coef[t] = static_cast<float>(coef[t] * m);
+        finish_lrgb_colour(yy, yc, col, coef);
       } else {
         // The seed paper's constant chromaticity: luminance-weighted mean Cb and Cr.
         double sy = 0.0, scb = 0.0, scr = 0.0;
@@ -244,8 +256,7 @@ class BandFitter {
             scr += wgt * ycc.cr;
           }
         }
-        col[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
-        col[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
+        finish_ycc_chroma(sy, scb, scr, col);
       }
     }
     if (st->active) {
@@ -466,17 +477,7 @@ class BandFitter {
             for (int k = 0; k < 3; ++k)
               yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
           }
-          double kk[3] = {1.0, 1.0, 1.0};
-          if (yy > 1e-20) {
-            for (int k = 0; k < 3; ++k) kk[k] = std::max(0.0, yc[k] / yy);
-          }
-          double m = std::max({kk[0], kk[1], kk[2]});
-          if (m <= 1e-12) {
-            kk[0] = kk[1] = kk[2] = 1.0;
-            m = 1.0;
-          }
-          for (int k = 0; k < 3; ++k) col[k] = static_cast<float>(kk[k] / m);
-          for (int t = 0; t < kPtmTerms; ++t) coef[t] = static_cast<float>(coef[t] * m);
+          finish_lrgb_colour(yy, yc, col, coef);
         } else {
           double sy = 0.0, scb = 0.0, scr = 0.0;
           if (ch == 3) {
@@ -489,8 +490,7 @@ class BandFitter {
               scr += wgt * ycc.cr;
             }
           }
-          col[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
-          col[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
+          finish_ycc_chroma(sy, scb, scr, col);
         }
       }
       if (st->active) {
