@@ -3,11 +3,12 @@
 # `ptmkit synth`), decode-only time through the same reader, then `ptmkit fit` (LRGB and RGB),
 # each the median of 3 runs, with peak resident memory. Figures go in docs/PERFORMANCE.md.
 # Usage: scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench, 2 threads)
+# PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 work="${1:-/tmp/ptmkit-bench}"
 threads="${2:-2}"
-build="$(bash "$root/scripts/build.sh" | tail -n 1)"
+build="${PTMKIT_BUILD:-$(bash "$root/scripts/build.sh" | tail -n 1)}"
 ptmkit="$build/apps/ptmkit"
 stack="$work/s12mp"
 mkdir -p "$work"

@@ -1,6 +1,8 @@
 #include "ptmkit/core/stack_reader.h"
 
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <string>
 
 #include <tbb/parallel_for.h>
@@ -22,9 +24,55 @@ int colour_channels(const OIIO::ImageSpec& spec) {
 
 }  // namespace
 
+namespace {
+
+// Decoding straight to float through OpenImageIO runs its generic per-sample converter, which
+// cost more than the JPEG decoding itself (measured: 29% of a whole fit's CPU). Integer files
+// are read in their own type and converted here: a table for 8-bit (the same values, v / 255),
+// a division for 16-bit.
+const std::array<float, 256>& u8_to_float() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int v = 0; v < 256; ++v) t[static_cast<std::size_t>(v)] = static_cast<float>(v) / 255.0f;
+    return t;
+  }();
+  return table;
+}
+
+bool read_rows_as_float(OIIO::ImageInput& in, int y0, int y1, int channels,
+                        std::vector<unsigned char>* scratch, float* out) {
+  const std::size_t count =
+      static_cast<std::size_t>(y1 - y0) * static_cast<std::size_t>(in.spec().width) * channels;
+  const auto base = in.spec().format.basetype;
+  if (base == OIIO::TypeDesc::UINT8) {
+    scratch->resize(count);
+    if (!in.read_scanlines(0, 0, y0, y1, 0, 0, channels, OIIO::TypeDesc::UINT8, scratch->data())) {
+      return false;
+    }
+    const auto& table = u8_to_float();
+    const unsigned char* src = scratch->data();
+    for (std::size_t k = 0; k < count; ++k) out[k] = table[src[k]];
+    return true;
+  }
+  if (base == OIIO::TypeDesc::UINT16) {
+    scratch->resize(count * 2);
+    if (!in.read_scanlines(0, 0, y0, y1, 0, 0, channels, OIIO::TypeDesc::UINT16,
+                           scratch->data())) {
+      return false;
+    }
+    const auto* src = reinterpret_cast<const std::uint16_t*>(scratch->data());
+    for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(src[k]) / 65535.0f;
+    return true;
+  }
+  return in.read_scanlines(0, 0, y0, y1, 0, 0, channels, OIIO::TypeDesc::FLOAT, out);
+}
+
+}  // namespace
+
 struct StackReader::Impl {
   std::vector<fs::path> files;
   std::vector<std::unique_ptr<OIIO::ImageInput>> inputs;
+  std::vector<std::vector<unsigned char>> scratch;  // per image: native samples of a band
   ImageInfo info;
   int channels = 0;
   int next_row = 0;
@@ -34,6 +82,7 @@ StackReader::StackReader(std::vector<fs::path> files) : impl_(std::make_unique<I
   if (files.empty()) throw Error("capture stack is empty: no images to read");
   impl_->files = std::move(files);
   impl_->inputs.resize(impl_->files.size());
+  impl_->scratch.resize(impl_->files.size());
   for (std::size_t i = 0; i < impl_->files.size(); ++i) {
     const fs::path& f = impl_->files[i];
     impl_->inputs[i] = internal::open_input(f);
@@ -82,7 +131,7 @@ bool StackReader::read_band(int rows, StackBand* band) {
   std::vector<std::string> errors(impl_->inputs.size());
   tbb::parallel_for(std::size_t{0}, impl_->inputs.size(), [&](std::size_t i) {
     auto& in = impl_->inputs[i];
-    if (!in->read_scanlines(0, 0, y0, y0 + n_rows, 0, 0, band->channels, OIIO::TypeDesc::FLOAT,
+    if (!read_rows_as_float(*in, y0, y0 + n_rows, band->channels, &impl_->scratch[i],
                             band->image(static_cast<int>(i)))) {
       errors[i] = internal::oiio_error(in.get());
     }

@@ -76,8 +76,9 @@ struct FitOptions {
 };
 
 // Residuals of the fit against its own input samples, in 8-bit grey levels (1/255 of full
-// scale), over every sample of every channel of the rows sampled: every row up to about a
-// million texels, every row_step-th row above (a fixed choice, so reports are reproducible).
+// scale), over every sample of every channel of the rows sampled: every row up to 2^18
+// texels, every row_step-th row above (a fixed choice, so reports are reproducible; 2^18
+// texels x N lights x channels is millions of samples, plenty for these statistics).
 struct ResidualStats {
   double rms_grey = 0.0;
   double mean_abs_grey = 0.0;
