@@ -1,6 +1,7 @@
 // Robust per-texel solvers: quality against synth truth, labels, determinism, CLI, extremes.
 #include <cmath>
 #include <fstream>
+#include <ostream>
 #include <random>
 
 #include <gmock/gmock.h>
@@ -28,6 +29,10 @@ struct PresetCase {
   // target in the comment.
   double min_gain_db;
 };
+// Readable test names in listings (gtest would otherwise print the struct's bytes).
+void PrintTo(const PresetCase& c, std::ostream* os) {
+  *os << c.preset << ", min gain " << c.min_gain_db << " dB";
+}
 
 class RobustPresets : public ::testing::TestWithParam<PresetCase> {};
 
