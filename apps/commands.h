@@ -14,5 +14,6 @@ void add_info_command(CLI::App& root);
 void add_render_command(CLI::App& root);
 void add_direct_command(CLI::App& root);
 void add_compare_command(CLI::App& root);
+void add_calibrate_command(CLI::App& root);
 
 }  // namespace ptmkit::app

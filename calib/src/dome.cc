@@ -1,7 +1,13 @@
 #include "ptmkit/calib/dome.h"
 
+#include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <numbers>
 
+#include <nlohmann/json.hpp>
+
+#include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
 
@@ -37,6 +43,157 @@ LightSet layout_light_set(std::string_view spec, const std::string& name_pattern
     set.lights.push_back(std::move(l));
   }
   return set;
+}
+
+}  // namespace ptmkit::calib
+
+namespace ptmkit::calib {
+
+namespace {
+
+Eigen::Vector3d rotate_yaw(const Eigen::Vector3d& v, double yaw_deg) {
+  const double a = yaw_deg * std::numbers::pi / 180.0;
+  const double c = std::cos(a), s = std::sin(a);
+  return {c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z()};
+}
+
+std::string image_name(const std::string& pattern, std::size_t index) {
+  char name[512];
+  std::snprintf(name, sizeof(name), pattern.c_str(), static_cast<int>(index + 1));
+  return name;
+}
+
+Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& what) {
+  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() ||
+      !j[2].is_number()) {
+    throw Error(what + " must be an array of three numbers");
+  }
+  Eigen::Vector3d v(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
+  if (!v.allFinite()) throw Error(what + " is not finite");
+  return v;
+}
+
+// Fills direction (and position) of a light, checking it is above the plane.
+void place(Light* light, const Eigen::Vector3d& dir_or_pos, bool is_position, double radius_mm,
+           double yaw_deg, const std::string& where_text) {
+  const Eigen::Vector3d v = rotate_yaw(dir_or_pos, yaw_deg);
+  if (v.norm() < 1e-12) throw Error(where_text + ": zero vector");
+  if (v.z() <= 0.0) throw Error(where_text + ": light is not above the sample plane (z <= 0)");
+  light->direction = v.normalized();
+  if (is_position) {
+    light->position_mm = v;
+  } else if (radius_mm > 0.0) {
+    light->position_mm = radius_mm * light->direction;
+  }
+}
+
+}  // namespace
+
+std::string DomeOptions::validate() const {
+  if (!(radius_mm >= 0.0) || !std::isfinite(radius_mm)) return "radius must be >= 0 mm";
+  if (!std::isfinite(yaw_deg)) return "yaw must be finite";
+  if (name_pattern.find('%') == std::string::npos) {
+    return "name pattern must contain a %d-style field for the light index";
+  }
+  return {};
+}
+
+LightSet dome_light_set(const DomeOptions& options) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("dome: " + err);
+  if (options.layout.size() > 5 &&
+      options.layout.compare(options.layout.size() - 5, 5, ".json") == 0) {
+    return read_dome_json(options.layout, options);
+  }
+  const auto dirs = layout_directions(options.layout);
+  LightSet set;
+  for (std::size_t i = 0; i < dirs.size(); ++i) {
+    Light l;
+    l.image = image_name(options.name_pattern, i);
+    place(&l, dirs[i], false, options.radius_mm, options.yaw_deg,
+          "layout " + options.layout + " light " + std::to_string(i + 1));
+    set.lights.push_back(std::move(l));
+  }
+  return set;
+}
+
+LightSet read_dome_json(const std::filesystem::path& path, const DomeOptions& defaults) {
+  std::ifstream in(path);
+  if (!in) throw Error(where(path) + ": cannot open dome description");
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(where(path) + ": not valid JSON: " + e.what());
+  }
+  if (!j.is_object()) throw Error(where(path) + ": expected a JSON object");
+  DomeOptions o = defaults;
+  try {
+    if (j.contains("radius_mm")) o.radius_mm = j.at("radius_mm").get<double>();
+    if (j.contains("yaw_deg")) o.yaw_deg = j.at("yaw_deg").get<double>();
+  } catch (const nlohmann::json::exception&) {
+    throw Error(where(path) + ": radius_mm and yaw_deg must be numbers");
+  }
+  if (const auto err = o.validate(); !err.empty()) throw Error(where(path) + ": " + err);
+  if (j.contains("layout") == j.contains("lights")) {
+    throw Error(where(path) + ": give either \"layout\" or \"lights\", not both or neither");
+  }
+  if (j.contains("layout")) {
+    if (!j["layout"].is_string()) throw Error(where(path) + ": \"layout\" must be a string");
+    o.layout = j["layout"].get<std::string>();
+    if (o.layout.ends_with(".json")) throw Error(where(path) + ": a layout cannot be a .json");
+    try {
+      return dome_light_set(o);
+    } catch (const Error& e) {
+      throw Error(where(path) + ": " + e.what());
+    }
+  }
+  const auto& lights = j["lights"];
+  if (!lights.is_array() || lights.empty()) {
+    throw Error(where(path) + ": \"lights\" must be a non-empty array");
+  }
+  LightSet set;
+  set.source = path;
+  const std::filesystem::path base = path.has_parent_path() ? path.parent_path() : ".";
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    const std::string what = where(path) + ": light " + std::to_string(i + 1);
+    const auto& e = lights[i];
+    if (!e.is_object()) throw Error(what + ": expected an object");
+    Light l;
+    l.image = e.contains("image") && e["image"].is_string()
+                  ? (base / e["image"].get<std::string>()).lexically_normal()
+                  : std::filesystem::path(image_name(o.name_pattern, i));
+    const bool has_dir = e.contains("direction");
+    const bool has_pos = e.contains("position_mm");
+    if (has_dir == has_pos) throw Error(what + ": give either direction or position_mm");
+    place(&l, vec3(has_dir ? e["direction"] : e["position_mm"], what), has_pos, o.radius_mm,
+          o.yaw_deg, what);
+    if (e.contains("intensity")) {
+      if (!e["intensity"].is_number() || !(e["intensity"].get<double>() > 0.0)) {
+        throw Error(what + ": intensity must be a positive number");
+      }
+      l.intensity = e["intensity"].get<double>();
+    }
+    set.lights.push_back(std::move(l));
+  }
+  return set;
+}
+
+void write_light_set_json(const std::filesystem::path& path, const LightSet& lights) {
+  nlohmann::json j;
+  j["frame"] = "light frame: x right, y toward the image top, z toward the camera; mm";
+  j["lights"] = nlohmann::json::array();
+  const auto base = std::filesystem::absolute(path).parent_path();
+  for (const Light& l : lights.lights) {
+    nlohmann::json e;
+    std::filesystem::path name = l.image;
+    if (name.is_absolute()) name = name.lexically_relative(base);
+    e["image"] = name.generic_string();
+    e["direction"] = {l.direction.x(), l.direction.y(), l.direction.z()};
+    if (l.position_mm) e["position_mm"] = {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()};
+    e["intensity"] = l.intensity;
+    j["lights"].push_back(e);
+  }
+  write_file_atomic(path, j.dump(2) + "\n");
 }
 
 }  // namespace ptmkit::calib

@@ -29,4 +29,41 @@ namespace ptmkit::calib {
 [[nodiscard]] LightSet layout_light_set(std::string_view spec,
                                         const std::string& name_pattern = "image_%03d.png");
 
+// A dome: a layout of lights, optionally at a finite radius (near lights), rotated about the
+// camera axis relative to the image.
+struct DomeOptions {
+  // Layout spec (above) or a dome description file (.json, see read_dome_json).
+  std::string layout = "icosa";
+  // Image file names, printf-style with the 1-based light index.
+  std::string name_pattern = "image_%03d.png";
+  // Dome radius in millimetres; 0 = distant lights (directions only). With a radius every
+  // light gets position_mm = radius * direction (dome centred on the sample-plane origin).
+  double radius_mm = 0.0;
+  // Rotation of the dome about the camera axis (z), degrees counter-clockwise seen from the
+  // camera: where the dome's azimuth 0 lies relative to the image's x axis.
+  double yaw_deg = 0.0;
+
+  [[nodiscard]] std::string validate() const;  // empty if valid
+};
+
+// The light set of a dome (directions, and positions when the radius is known). Throws
+// ptmkit::Error naming the problem (and the file, for .json).
+[[nodiscard]] LightSet dome_light_set(const DomeOptions& options);
+
+// A dome description (JSON):
+//   {"radius_mm": 500,                 optional: distant lights when absent or 0
+//    "yaw_deg": 0,                     optional rotation about the camera axis
+//    "layout": "dome49",               either a layout spec ...
+//    "lights": [                       ... or the lights themselves, each with
+//      {"image": "a.jpg", "direction": [x, y, z]}        a direction, or
+//      {"image": "b.jpg", "position_mm": [x, y, z]}      a position relative to the
+//    ]}                                                   sample-plane origin (light frame)
+// Image names default to the pattern. Errors name the file and the entry.
+[[nodiscard]] LightSet read_dome_json(const std::filesystem::path& path,
+                                      const DomeOptions& defaults = {});
+
+// Writes every light (image, direction, position_mm, intensity) as JSON, atomically: the
+// companion of the .lp for near lights, whose positions the .lp format cannot hold.
+void write_light_set_json(const std::filesystem::path& path, const LightSet& lights);
+
 }  // namespace ptmkit::calib
