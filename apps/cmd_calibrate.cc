@@ -4,6 +4,11 @@
 
 #include "commands.h"
 #include "ptmkit/calib/dome.h"
+#include "ptmkit/calib/sphere.h"
+#include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/core/stack_reader.h"
+#include "progress.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_set.h"
 
@@ -30,6 +35,56 @@ void run_dome(const DomeArgs& args) {
               lights.size(), min_el, max_el,
               lights.lights.front().position_mm ? ", with positions" : "", args.output.c_str(),
               args.json.empty() ? "" : " and ", args.json.c_str());
+}
+
+struct SphereArgs {
+  std::vector<std::string> images;
+  std::string output;
+  std::string report;
+  std::string sphere;
+  std::string mask;
+  std::string principal;
+  calib::SphereOptions options;
+};
+
+void run_sphere(const SphereArgs& args) {
+  calib::SphereOptions options = args.options;
+  if (!args.sphere.empty() && !args.mask.empty()) {
+    throw Error("give the sphere either by --sphere or by --mask, not both");
+  }
+  if (!args.sphere.empty()) {
+    double v[3];
+    parse_vector3(args.sphere, "--sphere", v);
+    calib::Circle c;
+    c.centre_px = {v[0], v[1]};
+    c.radius_px = v[2];
+    options.sphere = c;
+  }
+  if (!args.mask.empty()) options.sphere = calib::circle_from_mask(read_image(args.mask).view());
+  if (!args.principal.empty()) {
+    double v[3] = {0, 0, 0};
+    parse_vector3(args.principal + ",0", "--principal", v);
+    options.camera.principal_px = Eigen::Vector2d(v[0], v[1]);
+  }
+  std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
+  const std::vector<Image> images = read_stack(files);
+  const calib::SphereReport report = calib::calibrate_sphere(images, files, options);
+  const LightSet lights = calib::sphere_light_set(report);
+  if (lights.empty()) {
+    throw Error("no image has a usable highlight on the sphere (see the flags with --report)");
+  }
+  write_lp(args.output, lights);
+  if (!args.report.empty()) write_file_atomic(args.report, report.to_json() + "\n");
+  std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s); %d of %zu lights "
+              "usable -> %s\n",
+              report.sphere.centre_px.x(), report.sphere.centre_px.y(), report.sphere.radius_px,
+              report.sphere_detected ? "found" : "given", report.usable(), report.lights.size(),
+              args.output.c_str());
+  for (const auto& l : report.lights) {
+    if (!l.found) {
+      std::printf("  flagged %s: %s\n", l.image.filename().string().c_str(), l.flag.c_str());
+    }
+  }
 }
 
 }  // namespace
@@ -62,6 +117,34 @@ void add_calibrate_command(CLI::App& root) {
   d->add_option("--json", dome->json,
                 "Also write every light as JSON (directions, positions in mm, intensity)");
   d->callback([dome] { run_dome(*dome); });
+
+  auto sphere = std::make_shared<SphereArgs>();
+  CLI::App* sp = cmd->add_subcommand(
+      "sphere",
+      "Light directions from the highlight on a mirror or black glossy sphere in each photo. "
+      "The sphere is found automatically, or given by --sphere or --mask. Images without a "
+      "usable highlight are flagged and left out of the light file, never guessed.");
+  sp->add_option("images", sphere->images, "The photographs, one per light")->required();
+  sp->add_option("-o,--output", sphere->output, "Light file to write (.lp)")->required();
+  sp->add_option("--report", sphere->report,
+                 "JSON report: sphere, and per light the highlight pixel, peak, blob size, "
+                 "saturation, direction and flags");
+  sp->add_option("--sphere", sphere->sphere,
+                 "The sphere's circle cx,cy,r in pixels from the image's top-left pixel centre");
+  sp->add_option("--mask", sphere->mask, "A mask image of the sphere (pixels > 0.5)");
+  sp->add_option("--focal-px", sphere->options.camera.focal_px,
+                 "Focal length in pixels for the perspective model (0 = orthographic)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  sp->add_option("--principal", sphere->principal,
+                 "Principal point x,y in pixels (default: the image centre)");
+  sp->add_option("--blob-fraction", sphere->options.blob_fraction,
+                 "Highlight blob: pixels at or above this fraction of the peak")
+      ->capture_default_str();
+  sp->add_option("--min-peak", sphere->options.min_peak,
+                 "A peak below this (full scale 1) is no highlight")
+      ->capture_default_str();
+  sp->callback([sphere] { run_sphere(*sphere); });
 }
 
 }  // namespace ptmkit::app
