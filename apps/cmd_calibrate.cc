@@ -44,6 +44,9 @@ struct SphereArgs {
   std::string sphere;
   std::string mask;
   std::string principal;
+  std::string overlays;
+  std::string plot;
+  std::vector<int> drop;
   calib::SphereOptions options;
 };
 
@@ -68,13 +71,23 @@ void run_sphere(const SphereArgs& args) {
   }
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
   const std::vector<Image> images = read_stack(files);
-  const calib::SphereReport report = calib::calibrate_sphere(images, files, options);
+  calib::SphereReport report = calib::calibrate_sphere(images, files, options);
+  calib::drop_lights(args.drop, &report);
   const LightSet lights = calib::sphere_light_set(report);
   if (lights.empty()) {
     throw Error("no image has a usable highlight on the sphere (see the flags with --report)");
   }
   write_lp(args.output, lights);
   if (!args.report.empty()) write_file_atomic(args.report, report.to_json() + "\n");
+  if (!args.overlays.empty()) {
+    ensure_directory(args.overlays);
+    for (std::size_t i = 0; i < images.size(); ++i) {
+      const auto name = files[i].stem().string() + ".overlay.png";
+      write_image(std::filesystem::path(args.overlays) / name,
+                  calib::sphere_overlay(images[i], report, i).view());
+    }
+  }
+  if (!args.plot.empty()) write_image(args.plot, calib::light_polar_plot(report).view());
   std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s); %d of %zu lights "
               "usable -> %s\n",
               report.sphere.centre_px.x(), report.sphere.centre_px.y(), report.sphere.radius_px,
@@ -144,6 +157,13 @@ void add_calibrate_command(CLI::App& root) {
   sp->add_option("--min-peak", sphere->options.min_peak,
                  "A peak below this (full scale 1) is no highlight")
       ->capture_default_str();
+  sp->add_option("--drop", sphere->drop,
+                 "Leave these lights out (0-based indices, as in the report), e.g. --drop 3,7")
+      ->delimiter(',');
+  sp->add_option("--overlays", sphere->overlays,
+                 "Folder for one overlay PNG per image: the sphere and the highlight found "
+                 "(green used, red flagged)");
+  sp->add_option("--plot", sphere->plot, "Polar plot (PNG) of the light directions");
   sp->callback([sphere] { run_sphere(*sphere); });
 }
 

@@ -183,7 +183,9 @@ TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
   args.push_back((dir / "dark.png").string());
   auto ok_args = args;
   ok_args.insert(ok_args.end(), {"-o", (dir / "lights.lp").string(), "--report",
-                                 (dir / "report.json").string()});
+                                 (dir / "report.json").string(), "--overlays",
+                                 (dir / "overlays").string(), "--plot",
+                                 (dir / "polar.png").string()});
   const auto r = test::run_ptmkit(ok_args);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, ::testing::HasSubstr("5 of 6 lights usable"));
@@ -194,6 +196,18 @@ TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
     EXPECT_LT(angle_deg(lp.lights[i].direction, lights[i]), 0.3);  // 8-bit images
   }
   EXPECT_TRUE(fs::exists(dir / "report.json"));
+  EXPECT_EQ(test::list_files(dir / "overlays").size(), lights.size() + 1);
+  EXPECT_EQ(probe_image(dir / "polar.png").width, 600);
+  // Dropping a light by index leaves it out.
+  auto drop_args = args;
+  drop_args.insert(drop_args.end(), {"--drop", "1,2", "-o", (dir / "dropped.lp").string()});
+  const auto d = test::run_ptmkit(drop_args);
+  ASSERT_EQ(d.exit_code, 0) << d.err;
+  EXPECT_EQ(read_lp(dir / "dropped.lp").size(), lights.size() - 2);
+  auto bad_drop = args;
+  bad_drop.insert(bad_drop.end(), {"--drop", "17", "-o", (dir / "x.lp").string()});
+  EXPECT_EQ(test::run_ptmkit(bad_drop).exit_code, 1);
+  EXPECT_FALSE(fs::exists(dir / "x.lp"));
   // Only dark images: nothing usable, an error, and no light file.
   const auto bad = test::run_ptmkit({"calibrate", "sphere", (dir / "dark.png").string(),
                                      "--sphere", "200,200,160", "-o",

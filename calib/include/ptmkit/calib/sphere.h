@@ -100,4 +100,17 @@ struct SphereReport {
 // The usable lights as a light set (images and directions); flagged ones are left out.
 [[nodiscard]] LightSet sphere_light_set(const SphereReport& report);
 
+// Marks lights as dropped by the user (0-based indices into report->lights); an index out of
+// range throws ptmkit::Error.
+void drop_lights(const std::vector<int>& indices, SphereReport* report);
+
+// What was detected, to be looked at: the image with the sphere's circle and centre and the
+// highlight (green: used, red: flagged, with the reason), RGB, full scale 1.
+[[nodiscard]] Image sphere_overlay(const Image& image, const SphereReport& report,
+                                   std::size_t light_index);
+
+// A polar plot of the usable lights (azimuth around, elevation from the rim (0 degrees) to
+// the centre (90)), each labelled with its index; flagged lights listed in red. Square, RGB.
+[[nodiscard]] Image light_polar_plot(const SphereReport& report, int size_px = 600);
+
 }  // namespace ptmkit::calib
