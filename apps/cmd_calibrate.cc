@@ -3,14 +3,14 @@
 #include <memory>
 
 #include "commands.h"
+#include "progress.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/core/atomic_file.h"
-#include "ptmkit/core/image_io.h"
-#include "ptmkit/core/stack_reader.h"
-#include "progress.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/stack_reader.h"
 
 namespace ptmkit::app {
 
@@ -88,11 +88,12 @@ void run_sphere(const SphereArgs& args) {
     }
   }
   if (!args.plot.empty()) write_image(args.plot, calib::light_polar_plot(report).view());
-  std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s); %d of %zu lights "
-              "usable -> %s\n",
-              report.sphere.centre_px.x(), report.sphere.centre_px.y(), report.sphere.radius_px,
-              report.sphere_detected ? "found" : "given", report.usable(), report.lights.size(),
-              args.output.c_str());
+  std::printf(
+      "calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s); %d of %zu lights "
+      "usable -> %s\n",
+      report.sphere.centre_px.x(), report.sphere.centre_px.y(), report.sphere.radius_px,
+      report.sphere_detected ? "found" : "given", report.usable(), report.lights.size(),
+      args.output.c_str());
   for (const auto& l : report.lights) {
     if (!l.found) {
       std::printf("  flagged %s: %s\n", l.image.filename().string().c_str(), l.flag.c_str());
@@ -113,8 +114,7 @@ void add_calibrate_command(CLI::App& root) {
       "Write a light file from dome geometry: a standard layout (icosa: the seed paper's 40 "
       "lights; geodesic:F; dome49; rings:ELEV:COUNT[:AZIMUTH],...) or a dome description "
       "(.json with radius_mm, yaw_deg and a layout or per-light directions / positions).");
-  d->add_option("--layout", dome->options.layout,
-                "Layout spec or dome description .json")
+  d->add_option("--layout", dome->options.layout, "Layout spec or dome description .json")
       ->capture_default_str();
   d->add_option("-o,--output", dome->output, "Light file to write (.lp)")->required();
   d->add_option("--names", dome->options.name_pattern,

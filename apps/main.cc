@@ -14,9 +14,10 @@ constexpr const char* kExitCodes =
 }
 
 int main(int argc, char** argv) {
-  CLI::App app{"ptmkit: light-dependent textures (polynomial texture maps) from photographs "
-               "under known lights.",
-               "ptmkit"};
+  CLI::App app{
+      "ptmkit: light-dependent textures (polynomial texture maps) from photographs "
+      "under known lights.",
+      "ptmkit"};
   app.footer(kExitCodes);
   app.require_subcommand(1);
   app.set_version_flag("--version", "ptmkit 0.1.0");

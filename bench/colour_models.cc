@@ -29,10 +29,12 @@ int main(int argc, char** argv) {
     std::vector<ptmkit::Image> photos;
     for (const auto& l : test.lights) photos.push_back(ptmkit::read_image(l.image));
     const fs::path tmp = fs::temp_directory_path() / "ptmkit-colour-models.ptm";
-    std::printf("| model | held-out PSNR (dB) | mean abs (grey) | fit residual rms (grey) | file bytes/texel |\n");
+    std::printf(
+        "| model | held-out PSNR (dB) | mean abs (grey) | fit residual rms (grey) | file "
+        "bytes/texel |\n");
     std::printf("|---|---|---|---|---|\n");
-    for (auto model : {ptmkit::ColourModel::kRGB, ptmkit::ColourModel::kLRGB,
-                       ptmkit::ColourModel::kYCC}) {
+    for (auto model :
+         {ptmkit::ColourModel::kRGB, ptmkit::ColourModel::kLRGB, ptmkit::ColourModel::kYCC}) {
       ptmkit::fit::FitOptions options;
       options.model = model;
       ptmkit::texture::PtmStreamWriter writer(tmp);
@@ -50,8 +52,9 @@ int main(int argc, char** argv) {
       }
       const auto info = ptmkit::texture::read_ptm_info(tmp);
       std::printf("| %s | %.2f | %.2f | %.2f | %d |\n",
-                  std::string(ptmkit::to_string(model)).c_str(), psnr / static_cast<double>(test.size()),
-                  mae / static_cast<double>(test.size()), report.residuals.rms_grey, info.bytes_per_texel());
+                  std::string(ptmkit::to_string(model)).c_str(),
+                  psnr / static_cast<double>(test.size()), mae / static_cast<double>(test.size()),
+                  report.residuals.rms_grey, info.bytes_per_texel());
     }
     fs::remove(tmp);
   } catch (const ptmkit::Error& e) {

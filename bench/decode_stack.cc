@@ -24,8 +24,7 @@ int main(int argc, char** argv) {
     ptmkit::StackBand band;
     double checksum = 0.0;
     while (reader.read_band(band_rows, &band)) checksum += band.samples[band.samples.size() / 2];
-    const double s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("decoded %d images of %dx%dx%d in %.3f s (%.1f Mpixel/s; checksum %.3f)\n",
                 reader.count(), reader.width(), reader.height(), reader.channels(), s,
                 reader.count() * double(reader.width()) * reader.height() / s / 1e6, checksum);

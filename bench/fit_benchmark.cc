@@ -43,8 +43,8 @@ void BM_Fit(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kSide * kSide);
   state.SetLabel(std::string(ptmkit::to_string(options.model)) +
                  (options.precision == ptmkit::fit::Precision::kFloat ? " float" : " double") +
-                 (options.residual_stats ? " +residuals" : "") + " threads=" +
-                 std::to_string(options.threads));
+                 (options.residual_stats ? " +residuals" : "") +
+                 " threads=" + std::to_string(options.threads));
 }
 
 // model (0 rgb, 1 lrgb, 2 ycc), precision (0 float, 1 double), residuals, threads

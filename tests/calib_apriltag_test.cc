@@ -34,8 +34,8 @@ std::vector<Expected> read_expected(const fs::path& path) {
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     Expected e;
     double v[8];
-    const int n = std::sscanf(line.c_str(), "%d, (%lf %lf), (%lf %lf), (%lf %lf), (%lf %lf)",
-                              &e.id, &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &v[6], &v[7]);
+    const int n = std::sscanf(line.c_str(), "%d, (%lf %lf), (%lf %lf), (%lf %lf), (%lf %lf)", &e.id,
+                              &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &v[6], &v[7]);
     if (n != 9) ADD_FAILURE() << path << ": cannot parse '" << line << "'";
     for (int k = 0; k < 4; ++k) e.corners[k] = {v[2 * k], v[2 * k + 1]};
     out.push_back(e);

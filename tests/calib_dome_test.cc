@@ -35,8 +35,7 @@ TEST(CalibDome, LayoutsRadiusAndYaw) {
   const LightSet near = dome_light_set(o);
   for (std::size_t i = 0; i < near.size(); ++i) {
     ASSERT_TRUE(near.lights[i].position_mm.has_value());
-    EXPECT_NEAR((*near.lights[i].position_mm - 500.0 * near.lights[i].direction).norm(), 0.0,
-                1e-9);
+    EXPECT_NEAR((*near.lights[i].position_mm - 500.0 * near.lights[i].direction).norm(), 0.0, 1e-9);
     // Yaw 90: (x, y) -> (-y, x), elevation unchanged.
     EXPECT_NEAR(near.lights[i].direction.x(), -flat.lights[i].direction.y(), 1e-12);
     EXPECT_NEAR(near.lights[i].direction.y(), flat.lights[i].direction.x(), 1e-12);

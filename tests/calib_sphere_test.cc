@@ -65,9 +65,10 @@ TEST(CalibSphere, OrthographicNoiseFreeWithinATenthOfADegree) {
   EXPECT_NEAR((found.sphere.centre_px - rig.centre_px).norm(), 0.0, 0.1);
   EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, 0.1);
   const Errors detected = errors(found, lights);
-  std::printf("orthographic, r = 160 px, noise-free: mean %.4f max %.4f deg (circle given); "
-              "mean %.4f max %.4f deg (circle found)\n",
-              known.mean, known.max, detected.mean, detected.max);
+  std::printf(
+      "orthographic, r = 160 px, noise-free: mean %.4f max %.4f deg (circle given); "
+      "mean %.4f max %.4f deg (circle found)\n",
+      known.mean, known.max, detected.mean, detected.max);
   EXPECT_LE(known.mean, 0.1);
   EXPECT_LE(detected.mean, 0.1);
 }
@@ -99,9 +100,10 @@ TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
   const SphereReport with_model = calibrate_sphere(images, names, persp);
   const Errors p = errors(with_model, lights);
   const Errors o = errors(calibrate_sphere(images, names, {}), lights);
-  std::printf("pinhole f = 1400 px, off-axis, noise 2 grey: perspective model mean %.3f max %.3f "
-              "deg; orthographic model mean %.3f max %.3f deg\n",
-              p.mean, p.max, o.mean, o.max);
+  std::printf(
+      "pinhole f = 1400 px, off-axis, noise 2 grey: perspective model mean %.3f max %.3f "
+      "deg; orthographic model mean %.3f max %.3f deg\n",
+      p.mean, p.max, o.mean, o.max);
   EXPECT_LE(p.mean, 0.5);
   EXPECT_GT(o.mean, 2.0 * p.mean);  // the orthographic model is measurably worse off-axis
 }
@@ -153,9 +155,10 @@ TEST(CalibSphere, RealChromeSphereAgreesWithThePublishedLights) {
   o.sphere = circle_from_mask(read_image(*root / "chrome" / "chrome.mask.png").view());
   const SphereReport r = calibrate_sphere(images, names, o);
   const Errors e = errors(r, published);
-  std::printf("uw-psm chrome: circle (%.2f, %.2f) r %.2f px; vs published lights.txt: mean %.2f "
-              "max %.2f deg\n",
-              r.sphere.centre_px.x(), r.sphere.centre_px.y(), r.sphere.radius_px, e.mean, e.max);
+  std::printf(
+      "uw-psm chrome: circle (%.2f, %.2f) r %.2f px; vs published lights.txt: mean %.2f "
+      "max %.2f deg\n",
+      r.sphere.centre_px.x(), r.sphere.centre_px.y(), r.sphere.radius_px, e.mean, e.max);
   EXPECT_EQ(r.usable(), n);
   // The data's README: the published directions came from a simpler estimator, "expect
   // differences of a few degrees". Here one pixel of highlight position is about 1 degree
@@ -182,10 +185,10 @@ TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
   write_image(dir / "dark.png", synth::render_sphere_rig(rig).view());
   args.push_back((dir / "dark.png").string());
   auto ok_args = args;
-  ok_args.insert(ok_args.end(), {"-o", (dir / "lights.lp").string(), "--report",
-                                 (dir / "report.json").string(), "--overlays",
-                                 (dir / "overlays").string(), "--plot",
-                                 (dir / "polar.png").string()});
+  ok_args.insert(
+      ok_args.end(),
+      {"-o", (dir / "lights.lp").string(), "--report", (dir / "report.json").string(), "--overlays",
+       (dir / "overlays").string(), "--plot", (dir / "polar.png").string()});
   const auto r = test::run_ptmkit(ok_args);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, ::testing::HasSubstr("5 of 6 lights usable"));
@@ -209,9 +212,8 @@ TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
   EXPECT_EQ(test::run_ptmkit(bad_drop).exit_code, 1);
   EXPECT_FALSE(fs::exists(dir / "x.lp"));
   // Only dark images: nothing usable, an error, and no light file.
-  const auto bad = test::run_ptmkit({"calibrate", "sphere", (dir / "dark.png").string(),
-                                     "--sphere", "200,200,160", "-o",
-                                     (dir / "none.lp").string()});
+  const auto bad = test::run_ptmkit({"calibrate", "sphere", (dir / "dark.png").string(), "--sphere",
+                                     "200,200,160", "-o", (dir / "none.lp").string()});
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_FALSE(fs::exists(dir / "none.lp"));
 }

@@ -51,14 +51,14 @@ LightSet write_capture(const fs::path& dir, const std::vector<Eigen::Vector3d>& 
 TEST(CliFit, FitsWritesAReportAndIsDeterministicAcrossThreads) {
   test::ScratchDir dir;
   write_capture(dir.path(), calib::layout_directions("dome49"));
-  const auto r1 = test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o",
-                                    (dir / "one.ptm").string(), "--threads", "1", "--report",
-                                    (dir / "fit.json").string()});
+  const auto r1 =
+      test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o", (dir / "one.ptm").string(),
+                        "--threads", "1", "--report", (dir / "fit.json").string()});
   ASSERT_EQ(r1.exit_code, 0) << r1.err;
   EXPECT_THAT(r1.out, HasSubstr("49 lights"));
-  const auto r2 = test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o",
-                                    (dir / "two.ptm").string(), "--threads", "2", "--band-rows",
-                                    "3"});
+  const auto r2 =
+      test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o", (dir / "two.ptm").string(),
+                        "--threads", "2", "--band-rows", "3"});
   ASSERT_EQ(r2.exit_code, 0) << r2.err;
   EXPECT_EQ(slurp(dir / "one.ptm"), slurp(dir / "two.ptm"));
   const auto report = nlohmann::json::parse(slurp(dir / "fit.json"));
@@ -70,9 +70,9 @@ TEST(CliFit, FitsWritesAReportAndIsDeterministicAcrossThreads) {
   EXPECT_EQ(info.height, 16);
   EXPECT_EQ(info.format, texture::PtmFormat::kRGB);
   for (const char* format : {"lrgb", "ycc"}) {
-    const auto r = test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o",
-                                     (dir / (std::string(format) + ".ptm")).string(), "--format",
-                                     format});
+    const auto r =
+        test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o",
+                          (dir / (std::string(format) + ".ptm")).string(), "--format", format});
     EXPECT_EQ(r.exit_code, 0) << r.err;
   }
   EXPECT_EQ(texture::read_ptm_info(dir / "lrgb.ptm").format, texture::PtmFormat::kLRGB);
@@ -150,9 +150,9 @@ TEST(CliFit, BadInputsExitNonZeroNameTheProblemAndWriteNothing) {
 TEST(CliFit, RidgeFitsASingleRingWhenAsked) {
   test::ScratchDir dir;
   write_capture(dir.path(), ring_layout(parse_rings("35:12")), 8, 8);
-  const auto r = test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o",
-                                   (dir / "ring.ptm").string(), "--ridge", "1e-3", "--report",
-                                   (dir / "r.json").string()});
+  const auto r =
+      test::run_ptmkit({"fit", (dir / "lights.lp").string(), "-o", (dir / "ring.ptm").string(),
+                        "--ridge", "1e-3", "--report", (dir / "r.json").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto report = nlohmann::json::parse(slurp(dir / "r.json"));
   EXPECT_TRUE(report["design"]["regularised"].get<bool>());

@@ -93,8 +93,8 @@ TEST(FitImages, RecoversThePolynomialWorldWithinFloatInputPrecision) {
     // Samples are floats (relative rounding 2^-24 of values below 1) and so is the stored
     // result; the float path also rounds the pseudo-inverse and the products.
     const double eps = std::ldexp(1.0, -24);
-    const double tol = pinv_gain(design) * eps * (precision == Precision::kFloat ? 8.0 : 1.0) +
-                       2.0 * eps;
+    const double tol =
+        pinv_gain(design) * eps * (precision == Precision::kFloat ? 8.0 : 1.0) + 2.0 * eps;
     ASSERT_EQ(got.coeffs.size(), truth.coeffs.size());
     for (std::size_t i = 0; i < got.coeffs.size(); ++i) {
       ASSERT_NEAR(got.coeffs[i], truth.coeffs[i], tol) << "index " << i;

@@ -22,14 +22,15 @@ Image ramp(int w, int h, int c, double phase = 0.0) {
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       for (int k = 0; k < c; ++k)
-        img.at(x, y, k) = static_cast<float>(
-            0.5 + 0.45 * std::sin(0.3 * x + 0.7 * y + 1.3 * k + phase));
+        img.at(x, y, k) =
+            static_cast<float>(0.5 + 0.45 * std::sin(0.3 * x + 0.7 * y + 1.3 * k + phase));
   return img;
 }
 
 double max_diff(const Image& a, const Image& b) {
   double m = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, double(std::abs(a.data()[i] - b.data()[i])));
+  for (std::size_t i = 0; i < a.size(); ++i)
+    m = std::max(m, double(std::abs(a.data()[i] - b.data()[i])));
   return m;
 }
 
@@ -62,7 +63,8 @@ TEST(ImageIO, JpegIsReadAndColourSpaceIsRecorded) {
   Image img(32, 16, 3, ColourSpace::kSRGB);
   for (int y = 0; y < 16; ++y)
     for (int x = 0; x < 32; ++x)
-      for (int k = 0; k < 3; ++k) img.at(x, y, k) = 0.1f + 0.015f * float(x) + 0.01f * float(y) + 0.1f * float(k);
+      for (int k = 0; k < 3; ++k)
+        img.at(x, y, k) = 0.1f + 0.015f * float(x) + 0.01f * float(y) + 0.1f * float(k);
   write_image(dir / "a.jpg", img.view(), {.format = PixelFormat::kU8, .jpeg_quality = 98});
   const Image back = read_image(dir / "a.jpg");
   EXPECT_EQ(back.colour_space(), ColourSpace::kSRGB);
@@ -174,7 +176,8 @@ TEST(StackReader, NaNInAFloatImageIsAnErrorNamingFileAndRow) {
   px[(5 * 8 + 2) * 3 + 1] = std::nanf("");
   auto out = OIIO::ImageOutput::create((dir / "nan.exr").string());
   ASSERT_TRUE(out);
-  ASSERT_TRUE(out->open((dir / "nan.exr").string(), OIIO::ImageSpec(8, 8, 3, OIIO::TypeDesc::FLOAT)));
+  ASSERT_TRUE(
+      out->open((dir / "nan.exr").string(), OIIO::ImageSpec(8, 8, 3, OIIO::TypeDesc::FLOAT)));
   ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
   out->close();
   StackReader r({dir / "nan.exr"});

@@ -34,7 +34,8 @@ std::string read_all(const fs::path& p) {
 
 ScratchDir::ScratchDir() {
   std::string name = current_test_name();
-  std::replace_if(name.begin(), name.end(), [](char c) { return c == '/' || c == '.'; }, '_');
+  std::replace_if(
+      name.begin(), name.end(), [](char c) { return c == '/' || c == '.'; }, '_');
   path_ = fs::temp_directory_path() / ("ptmkit-test-" + std::to_string(::getpid())) / name;
   fs::remove_all(path_);
   fs::create_directories(path_);
@@ -63,9 +64,9 @@ std::optional<fs::path> shared_data(const std::string& sub) {
 
 RunResult run_ptmkit(const std::vector<std::string>& args) {
   RunResult result;
-  const fs::path tmp = fs::temp_directory_path() /
-                       ("ptmkit-run-" + std::to_string(::getpid()) + "-" +
-                        std::to_string(std::hash<std::string>{}(current_test_name())));
+  const fs::path tmp =
+      fs::temp_directory_path() / ("ptmkit-run-" + std::to_string(::getpid()) + "-" +
+                                   std::to_string(std::hash<std::string>{}(current_test_name())));
   const fs::path out_path = tmp.string() + ".out";
   const fs::path err_path = tmp.string() + ".err";
   std::vector<std::string> argv_store;

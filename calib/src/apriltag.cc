@@ -102,7 +102,7 @@ std::vector<TagDetection> detect_tags(ConstImageViewF image, const TagDetectorOp
 
   const FamilyInfo& fam = info(options.family);
   std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(fam.create(),
-                                                                           fam.destroy);
+                                                                          fam.destroy);
   std::unique_ptr<apriltag_detector_t, void (*)(apriltag_detector_t*)> detector(
       apriltag_detector_create(), apriltag_detector_destroy);
   apriltag_detector_add_family_bits(detector.get(), family.get(), options.max_hamming);
@@ -122,7 +122,8 @@ std::vector<TagDetection> detect_tags(ConstImageViewF image, const TagDetectorOp
     t.hamming = d->hamming;
     t.decision_margin = d->decision_margin;
     t.centre_px = {d->c[0], d->c[1]};
-    for (int k = 0; k < 4; ++k) t.corners_px[static_cast<std::size_t>(k)] = {d->p[k][0], d->p[k][1]};
+    for (int k = 0; k < 4; ++k)
+      t.corners_px[static_cast<std::size_t>(k)] = {d->p[k][0], d->p[k][1]};
     out.push_back(t);
   }
   apriltag_detections_destroy(raw);

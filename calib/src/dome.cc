@@ -189,7 +189,8 @@ void write_light_set_json(const std::filesystem::path& path, const LightSet& lig
     if (name.is_absolute()) name = name.lexically_relative(base);
     e["image"] = name.generic_string();
     e["direction"] = {l.direction.x(), l.direction.y(), l.direction.z()};
-    if (l.position_mm) e["position_mm"] = {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()};
+    if (l.position_mm)
+      e["position_mm"] = {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()};
     e["intensity"] = l.intensity;
     j["lights"].push_back(e);
   }

@@ -62,8 +62,8 @@ Circle fit_circle(const std::vector<Eigen::Vector2d>& pts,
     std::vector<double> res;
     for (const auto& p : use) res.push_back(std::abs((p - c.centre_px).norm() - c.radius_px));
     std::vector<double> sorted = res;
-    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                     sorted.end());
+    std::nth_element(sorted.begin(),
+                     sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
     const double limit = std::max(3.0 * 1.4826 * sorted[sorted.size() / 2], 0.05);
     std::vector<Eigen::Vector2d> kept;
     for (std::size_t i = 0; i < use.size(); ++i) {
@@ -83,7 +83,8 @@ double bilinear(const cv::Mat& m, double x, double y) {
   const double fx = x - x0, fy = y - y0;
   const float* r0 = m.ptr<float>(y0);
   const float* r1 = m.ptr<float>(y0 + 1);
-  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+         fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
 }
 
 }  // namespace
@@ -99,7 +100,8 @@ Circle circle_from_mask(ConstImageViewF mask) {
       if (y + 1 < mask.height && in != inside(x, y + 1)) pts.emplace_back(x, y + 0.5);
     }
   }
-  if (pts.size() < 12) throw Error("sphere mask has no usable region (pixels > 0.5 are the sphere)");
+  if (pts.size() < 12)
+    throw Error("sphere mask has no usable region (pixels > 0.5 are the sphere)");
   std::vector<Eigen::Vector2d> kept;
   Circle c = fit_circle(pts, &kept);
   c.outline_px = std::move(kept);
@@ -126,8 +128,9 @@ Circle find_sphere(const std::vector<Image>& images) {
   cv::HoughCircles(grey8, circles, cv::HOUGH_GRADIENT, 1.0, min_side / 4.0, 100.0, 30.0,
                    std::max(8, min_side / 20), min_side / 2);
   if (circles.empty()) {
-    throw Error("no sphere found in the images: give its circle with --sphere cx,cy,r (pixels) "
-                "or a mask with --mask");
+    throw Error(
+        "no sphere found in the images: give its circle with --sphere cx,cy,r (pixels) "
+        "or a mask with --mask");
   }
   Circle rough;
   rough.centre_px = {circles[0][0], circles[0][1]};
@@ -162,7 +165,8 @@ Circle find_sphere(const std::vector<Image>& images) {
         const double gm = std::abs(prof[i] - (i >= 2 ? prof[i - 2] : prof[i - 1]));
         const double gp = std::abs((i + 2 < prof.size() ? prof[i + 2] : prof[i + 1]) - prof[i]);
         const double den = gm - 2.0 * g + gp;
-        const double off = std::abs(den) > 1e-12 ? std::clamp(0.5 * (gm - gp) / den, -0.5, 0.5) : 0.0;
+        const double off =
+            std::abs(den) > 1e-12 ? std::clamp(0.5 * (gm - gp) / den, -0.5, 0.5) : 0.0;
         best = g;
         best_r = r0 + (static_cast<double>(i) + off) * dr;
       }
@@ -202,8 +206,8 @@ std::string SphereOptions::validate() const {
 }
 
 int SphereReport::usable() const {
-  return static_cast<int>(std::count_if(lights.begin(), lights.end(),
-                                        [](const SphereLight& l) { return l.found; }));
+  return static_cast<int>(
+      std::count_if(lights.begin(), lights.end(), [](const SphereLight& l) { return l.found; }));
 }
 
 Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& camera,
@@ -245,8 +249,8 @@ Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& came
     std::vector<double> a(static_cast<std::size_t>(res.size()));
     for (Eigen::Index i = 0; i < res.size(); ++i) a[static_cast<std::size_t>(i)] = std::abs(res(i));
     std::vector<double> sorted = a;
-    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                     sorted.end());
+    std::nth_element(sorted.begin(),
+                     sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
     const double limit = 3.0 * 1.4826 * sorted[sorted.size() / 2] + 1e-12;
     std::vector<Eigen::Index> keep;
     for (Eigen::Index i = 0; i < res.size(); ++i) {
@@ -254,7 +258,8 @@ Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& came
     }
     if (keep.size() >= 8 && keep.size() < static_cast<std::size_t>(res.size())) {
       Eigen::MatrixXd ek(static_cast<Eigen::Index>(keep.size()), 3);
-      for (std::size_t k = 0; k < keep.size(); ++k) ek.row(static_cast<Eigen::Index>(k)) = e.row(keep[k]);
+      for (std::size_t k = 0; k < keep.size(); ++k)
+        ek.row(static_cast<Eigen::Index>(k)) = e.row(keep[k]);
       wcone = ek.colPivHouseholderQr().solve(Eigen::VectorXd::Ones(ek.rows()));
     }
   }

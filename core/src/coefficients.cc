@@ -79,8 +79,7 @@ void CoefficientMap::evaluate(int x, int y, double lu, double lv, float rgb[3]) 
   }
 }
 
-void CoefficientMapSink::begin(int width, int height, ColourModel model,
-                               ColourSpace colour_space) {
+void CoefficientMapSink::begin(int width, int height, ColourModel model, ColourSpace colour_space) {
   *map_ = CoefficientMap(width, height, model, colour_space);
 }
 

@@ -24,13 +24,15 @@ Image::Image(int width, int height, int channels, ColourSpace colour_space, floa
 }
 
 ImageViewF Image::view() {
-  return {pixels_.data(), width_, height_, channels_,
-          static_cast<std::ptrdiff_t>(width_) * channels_, colour_space_};
+  return {
+      pixels_.data(), width_, height_, channels_, static_cast<std::ptrdiff_t>(width_) * channels_,
+      colour_space_};
 }
 
 ConstImageViewF Image::view() const {
-  return {pixels_.data(), width_, height_, channels_,
-          static_cast<std::ptrdiff_t>(width_) * channels_, colour_space_};
+  return {
+      pixels_.data(), width_, height_, channels_, static_cast<std::ptrdiff_t>(width_) * channels_,
+      colour_space_};
 }
 
 Image Image::copy_of(ConstImageViewF view) {

@@ -8,9 +8,9 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "internal_oiio.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
-#include "internal_oiio.h"
 
 namespace fs = std::filesystem;
 
@@ -141,8 +141,7 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
   if (options.format == PixelFormat::kU16) type = OIIO::TypeDesc::UINT16;
   if (options.format == PixelFormat::kF32) type = OIIO::TypeDesc::FLOAT;
   OIIO::ImageSpec spec(image.width, image.height, image.channels, type);
-  spec.attribute("oiio:ColorSpace",
-                 image.colour_space == ColourSpace::kLinear ? "Linear" : "sRGB");
+  spec.attribute("oiio:ColorSpace", image.colour_space == ColourSpace::kLinear ? "Linear" : "sRGB");
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });

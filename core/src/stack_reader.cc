@@ -56,8 +56,7 @@ bool read_rows_as_float(OIIO::ImageInput& in, int y0, int y1, int channels,
   }
   if (base == OIIO::TypeDesc::UINT16) {
     scratch->resize(count * 2);
-    if (!in.read_scanlines(0, 0, y0, y1, 0, 0, channels, OIIO::TypeDesc::UINT16,
-                           scratch->data())) {
+    if (!in.read_scanlines(0, 0, y0, y1, 0, 0, channels, OIIO::TypeDesc::UINT16, scratch->data())) {
       return false;
     }
     const auto* src = reinterpret_cast<const std::uint16_t*>(scratch->data());

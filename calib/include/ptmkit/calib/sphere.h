@@ -70,10 +70,10 @@ struct SphereOptions {
 
 struct SphereLight {
   std::filesystem::path image;
-  bool found = false;           // false: no usable highlight (see flag)
-  std::string flag;             // why the light is unusable or doubtful; empty when fine
+  bool found = false;  // false: no usable highlight (see flag)
+  std::string flag;    // why the light is unusable or doubtful; empty when fine
   Eigen::Vector2d highlight_px{0.0, 0.0};
-  double peak = 0.0;            // brightest value in the blob, full scale 1
+  double peak = 0.0;  // brightest value in the blob, full scale 1
   int blob_pixels = 0;
   bool saturated = false;
   Eigen::Vector3d direction{0.0, 0.0, 1.0};  // light frame, unit

@@ -42,8 +42,13 @@ struct ImageView {
   // A view of a rectangle of this one, sharing its pixels.
   [[nodiscard]] ImageView crop(int x0, int y0, int w, int h) const {
     assert(x0 >= 0 && y0 >= 0 && x0 + w <= width && y0 + h <= height);
-    return {data + static_cast<std::ptrdiff_t>(y0) * stride + static_cast<std::ptrdiff_t>(x0) * channels,
-            w, h, channels, stride, colour_space};
+    return {data + static_cast<std::ptrdiff_t>(y0) * stride +
+                static_cast<std::ptrdiff_t>(x0) * channels,
+            w,
+            h,
+            channels,
+            stride,
+            colour_space};
   }
   operator ImageView<const T>() const {  // NOLINT: views convert to read-only views freely
     return {data, width, height, channels, stride, colour_space};

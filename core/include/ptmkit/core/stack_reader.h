@@ -16,8 +16,8 @@
 namespace ptmkit {
 
 struct StackBand {
-  int y0 = 0;        // first image row in this band (0 = top)
-  int rows = 0;      // rows in this band
+  int y0 = 0;    // first image row in this band (0 = top)
+  int rows = 0;  // rows in this band
   int width = 0;
   int channels = 0;
   int images = 0;
