@@ -87,31 +87,9 @@ void run_fit(const FitArgs& args) {
                 ImageWriteOptions{png ? PixelFormat::kU16 : PixelFormat::kF32});
   }
   if (outputs.want_labels) {
-    // One 8-bit image per light, named after its photograph, codes as `ptmkit synth`'s
-    // truth/labels (0 inlier, 1 shadow, 2 highlight).
-    ensure_directory(args.labels);
-    const std::size_t n = lights.size();
-    Image lab(report.width, report.height, 1, ColourSpace::kLinear);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int y = 0; y < report.height; ++y) {
-        for (int x = 0; x < report.width; ++x) {
-          const std::size_t texel = static_cast<std::size_t>(y) * report.width + x;
-          lab.at(x, y, 0) = static_cast<float>(outputs.labels[texel * n + i]) / 255.0f;
-        }
-      }
-      const fs::path name = lights.lights[i].image.filename().replace_extension(".png");
-      write_image(fs::path(args.labels) / name, lab.view(), ImageWriteOptions{PixelFormat::kU8});
-    }
+    fit::write_label_images(args.labels, outputs, lights, report.width, report.height);
   }
-  if (!args.normals.empty()) {
-    if (fs::path(args.normals).extension() == ".png") {
-      Image enc = outputs.normals;  // (n + 1) / 2 in 16 bits
-      for (std::size_t i = 0; i < enc.size(); ++i) enc.data()[i] = 0.5f * (enc.data()[i] + 1.0f);
-      write_image(args.normals, enc.view(), ImageWriteOptions{PixelFormat::kU16});
-    } else {
-      write_image(args.normals, outputs.normals.view(), exr);
-    }
-  }
+  if (!args.normals.empty()) write_normal_map(args.normals, outputs.normals.view());
   const texture::PtmWriteReport& ptm = writer.report();
 
   if (!args.report.empty()) {

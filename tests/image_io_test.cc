@@ -6,6 +6,7 @@
 #include <OpenImageIO/imageio.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/stack_reader.h"
@@ -191,6 +192,24 @@ TEST(StackReader, NaNInAFloatImageIsAnErrorNamingFileAndRow) {
     EXPECT_THAT(e.what(), HasSubstr("row 5"));
   }
   EXPECT_THROW((void)read_image(dir / "nan.exr"), Error);
+}
+
+TEST(ImageIO, NormalMapsRoundTripAsFloatsOrAsHalfPlusHalf) {
+  test::ScratchDir dir;
+  Image n(9, 7, 3, ColourSpace::kLinear);
+  for (int y = 0; y < 7; ++y)
+    for (int x = 0; x < 9; ++x) {
+      const Eigen::Vector3d v = Eigen::Vector3d(0.1 * x - 0.4, 0.3 - 0.1 * y, 1.0).normalized();
+      for (int c = 0; c < 3; ++c) n.at(x, y, c) = static_cast<float>(v[c]);
+    }
+  write_normal_map(dir / "n.exr", n.view());
+  write_normal_map(dir / "n.png", n.view());
+  EXPECT_EQ(probe_image(dir / "n.png").format, PixelFormat::kU16);
+  EXPECT_EQ(max_diff(read_normal_map(dir / "n.exr"), n), 0.0);
+  // 16 bits of (n + 1) / 2: half a step of 1/65535, doubled by the decoding.
+  EXPECT_LE(max_diff(read_normal_map(dir / "n.png"), n), 1.0 / 65535 + 1e-6);
+  // The PNG holds (n + 1) / 2: the zenith normal's z is stored as full scale.
+  EXPECT_NEAR(read_image(dir / "n.png").at(4, 3, 2), 0.5 * (n.at(4, 3, 2) + 1.0), 1e-4);
 }
 
 }  // namespace

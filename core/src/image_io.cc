@@ -172,4 +172,31 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
   out_file.commit();
 }
 
+void write_normal_map(const fs::path& path, ConstImageViewF normals) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext == ".exr") {
+    write_image(path, normals, {.format = PixelFormat::kF32});
+    return;
+  }
+  Image encoded(normals.width, normals.height, normals.channels, ColourSpace::kLinear);
+  for (int y = 0; y < normals.height; ++y) {
+    const float* row = normals.row(y);
+    for (int i = 0; i < normals.width * normals.channels; ++i) {
+      encoded.row(y)[i] = 0.5f * (row[i] + 1.0f);
+    }
+  }
+  write_image(path, encoded.view(), {.format = PixelFormat::kU16});
+}
+
+Image read_normal_map(const fs::path& path) {
+  const bool stored_as_floats = probe_image(path).format == PixelFormat::kF32;
+  Image n = read_image(path);
+  if (!stored_as_floats) {
+    for (std::size_t i = 0; i < n.size(); ++i) n.data()[i] = 2.0f * n.data()[i] - 1.0f;
+  }
+  return n;
+}
+
 }  // namespace ptmkit

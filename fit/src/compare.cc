@@ -60,12 +60,6 @@ struct Truth {
   Image mask;  // optional: normal error only where its first channel > 0.5
 };
 
-Image decode_normal_png(const fs::path& path) {
-  Image n = read_image(path);  // (n + 1) / 2
-  for (std::size_t i = 0; i < n.size(); ++i) n.data()[i] = 2.0f * n.data()[i] - 1.0f;
-  return n;
-}
-
 void check_normals(const Truth& t, const Capture& cap, const fs::path& where) {
   if (t.normals.width() != cap.images[0].width() || t.normals.height() != cap.images[0].height() ||
       t.normals.channels() < 3) {
@@ -85,7 +79,7 @@ std::optional<Truth> load_truth(const fs::path& lp, const Capture& cap) {
   Truth t;
   if (!fs::exists(dir / "truth.json")) {
     if (!fs::exists(dir / "normals.png")) return std::nullopt;
-    t.normals = decode_normal_png(dir / "normals.png");
+    t.normals = read_normal_map(dir / "normals.png");
     if (fs::exists(dir / "mask.png")) t.mask = read_image(dir / "mask.png");
     check_normals(t, cap, dir / "normals.png");
     return t;
@@ -107,7 +101,7 @@ std::optional<Truth> load_truth(const fs::path& lp, const Capture& cap) {
   if (fs::exists(exr)) {
     t.normals = read_image(exr);
   } else if (fs::exists(png)) {
-    t.normals = decode_normal_png(png);
+    t.normals = read_normal_map(png);
   } else {
     throw Error(exr.string() + ": missing true normals (nor normals.png beside it)");
   }

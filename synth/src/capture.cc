@@ -238,13 +238,9 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
     ensure_directory(truth_dir / "diffuse");
     ensure_directory(truth_dir / "labels");
     if (relief) {
-      write_image(truth_dir / "normals.exr", scene.normals.view(), f32);
+      write_normal_map(truth_dir / "normals.exr", scene.normals.view());
       written(truth_dir / "normals.exr");
-      Image encoded(scene.width, scene.height, 3, ColourSpace::kLinear);
-      for (std::size_t i = 0; i < encoded.size(); ++i) {
-        encoded.data()[i] = 0.5f * (scene.normals.data()[i] + 1.0f);
-      }
-      write_image(truth_dir / "normals.png", encoded.view(), u16);
+      write_normal_map(truth_dir / "normals.png", scene.normals.view());
       written(truth_dir / "normals.png");
       write_image(truth_dir / "albedo.exr", scene.albedo.view(), f32);
       written(truth_dir / "albedo.exr");

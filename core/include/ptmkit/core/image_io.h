@@ -44,4 +44,10 @@ struct ImageWriteOptions {
 void write_image(const std::filesystem::path& path, ConstImageViewF image,
                  const ImageWriteOptions& options = {});
 
+// Normal maps: unit normals, x, y, z in R, G, B (light frame). Written as floats to .exr;
+// to any other type as (n + 1) / 2 in 16 bits (the usual RTI normal-map encoding).
+void write_normal_map(const std::filesystem::path& path, ConstImageViewF normals);
+// Reads either form: float files as stored, integer files decoded from (n + 1) / 2.
+[[nodiscard]] Image read_normal_map(const std::filesystem::path& path);
+
 }  // namespace ptmkit

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,12 @@ struct FitOutputs {
   // equal).
   Image albedo;
 };
+
+// Writes outputs.labels as one 8-bit image per light into `dir` (created if missing), named
+// after the light's photograph with a .png extension; the codes are `ptmkit synth`'s
+// truth/labels (0 inlier, 1 shadow, 2 highlight).
+void write_label_images(const std::filesystem::path& dir, const FitOutputs& outputs,
+                        const LightSet& lights, int width, int height);
 
 struct FitOptions {
   // Colour model (see core/coefficients.h). kRGB is the default: it is the most accurate on
