@@ -6,10 +6,12 @@
 #include "progress.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
+#include "ptmkit/calib/sphere_refine.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/plane.h"
 #include "ptmkit/core/stack_reader.h"
 
 namespace ptmkit::app {
@@ -41,7 +43,14 @@ struct SphereArgs {
   std::vector<std::string> images;
   std::string output;
   std::string report;
-  std::string sphere;
+  std::vector<std::string> spheres;
+  int sphere_count = 1;
+  double sphere_radius_mm = 0.0;
+  std::string plane;
+  std::string json;
+  bool drop_outliers = false;
+  bool no_refine = false;
+  double outlier_px = 1.5;
   std::string mask;
   std::string principal;
   std::string overlays;
@@ -51,52 +60,86 @@ struct SphereArgs {
 };
 
 void run_sphere(const SphereArgs& args) {
-  calib::SphereOptions options = args.options;
-  if (!args.sphere.empty() && !args.mask.empty()) {
+  calib::RigOptions options;
+  options.detection = args.options;
+  options.sphere_count = args.sphere_count;
+  options.sphere_radius_mm = args.sphere_radius_mm;
+  options.refine = !args.no_refine;
+  options.outlier_px = args.outlier_px;
+  if (!args.spheres.empty() && !args.mask.empty()) {
     throw Error("give the sphere either by --sphere or by --mask, not both");
   }
-  if (!args.sphere.empty()) {
+  for (const std::string& text : args.spheres) {
     double v[3];
-    parse_vector3(args.sphere, "--sphere", v);
+    parse_vector3(text, "--sphere", v);
     calib::Circle c;
     c.centre_px = {v[0], v[1]};
     c.radius_px = v[2];
-    options.sphere = c;
+    options.spheres.push_back(c);
   }
-  if (!args.mask.empty()) options.sphere = calib::circle_from_mask(read_image(args.mask).view());
+  if (!args.mask.empty()) {
+    options.spheres.push_back(calib::circle_from_mask(read_image(args.mask).view()));
+  }
   if (!args.principal.empty()) {
     double v[3] = {0, 0, 0};
     parse_vector3(args.principal + ",0", "--principal", v);
-    options.camera.principal_px = Eigen::Vector2d(v[0], v[1]);
+    options.detection.camera.principal_px = Eigen::Vector2d(v[0], v[1]);
   }
+  if (!args.plane.empty()) options.plane = read_plane_json(args.plane);
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
   const std::vector<Image> images = read_stack(files);
-  calib::SphereReport report = calib::calibrate_sphere(images, files, options);
-  calib::drop_lights(args.drop, &report);
-  const LightSet lights = calib::sphere_light_set(report);
+  calib::RigReport report = calib::calibrate_rig(images, files, options);
+  calib::drop_rig_lights(args.drop, &report);
+  const int dropped = args.drop_outliers ? calib::drop_outliers(&report) : 0;
+  const LightSet lights = calib::rig_light_set(report);
   if (lights.empty()) {
     throw Error("no image has a usable highlight on the sphere (see the flags with --report)");
   }
   write_lp(args.output, lights);
+  if (!args.json.empty()) calib::write_light_set_json(args.json, lights);
   if (!args.report.empty()) write_file_atomic(args.report, report.to_json() + "\n");
   if (!args.overlays.empty()) {
     ensure_directory(args.overlays);
     for (std::size_t i = 0; i < images.size(); ++i) {
+      Image overlay = images[i];
+      for (const calib::SphereReport& s : report.spheres) {
+        overlay = calib::sphere_overlay(overlay, s, i);
+      }
       const auto name = files[i].stem().string() + ".overlay.png";
-      write_image(std::filesystem::path(args.overlays) / name,
-                  calib::sphere_overlay(images[i], report, i).view());
+      write_image(std::filesystem::path(args.overlays) / name, overlay.view());
     }
   }
-  if (!args.plot.empty()) write_image(args.plot, calib::light_polar_plot(report).view());
-  std::printf(
-      "calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s); %d of %zu lights "
-      "usable -> %s\n",
-      report.sphere.centre_px.x(), report.sphere.centre_px.y(), report.sphere.radius_px,
-      report.sphere_detected ? "found" : "given", report.usable(), report.lights.size(),
-      args.output.c_str());
+  if (!args.plot.empty()) {
+    // The plot shows the rig's lights: the first sphere's report with the rig's results.
+    calib::SphereReport shown = report.spheres.front();
+    for (std::size_t i = 0; i < shown.lights.size(); ++i) {
+      shown.lights[i].found = report.lights[i].found;
+      shown.lights[i].flag = report.lights[i].flag;
+      shown.lights[i].direction = report.lights[i].direction;
+    }
+    write_image(args.plot, calib::light_polar_plot(shown).view());
+  }
+  for (const calib::SphereReport& s : report.spheres) {
+    std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s)\n",
+                s.sphere.centre_px.x(), s.sphere.centre_px.y(), s.sphere.radius_px,
+                s.sphere_detected ? "found" : "given");
+  }
+  std::printf("calibrate sphere: %s model%s; %d of %zu lights usable, %d outliers%s -> %s%s%s\n",
+              report.model.c_str(), report.refined ? ", refined" : "", report.usable(),
+              report.lights.size(), report.outliers(), dropped > 0 ? " (dropped)" : "",
+              args.output.c_str(), args.json.empty() ? "" : " and ", args.json.c_str());
+  if (report.near) std::printf("  light positions: origin at %s\n", report.origin.c_str());
+  if (!report.near && report.spheres.size() >= 2 && 2 * report.outliers() > report.usable()) {
+    std::printf(
+        "  most lights disagree between the spheres: near lights? (give --sphere-radius-mm "
+        "and --focal-px to triangulate their positions)\n");
+  }
   for (const auto& l : report.lights) {
     if (!l.found) {
       std::printf("  flagged %s: %s\n", l.image.filename().string().c_str(), l.flag.c_str());
+    } else if (l.outlier) {
+      std::printf("  outlier %s (residual %.2f px, confidence %.2f): %s\n",
+                  l.image.filename().string().c_str(), l.residual_px, l.confidence, l.flag.c_str());
     }
   }
 }
@@ -140,10 +183,36 @@ void add_calibrate_command(CLI::App& root) {
   sp->add_option("images", sphere->images, "The photographs, one per light")->required();
   sp->add_option("-o,--output", sphere->output, "Light file to write (.lp)")->required();
   sp->add_option("--report", sphere->report,
-                 "JSON report: sphere, and per light the highlight pixel, peak, blob size, "
-                 "saturation, direction and flags");
-  sp->add_option("--sphere", sphere->sphere,
-                 "The sphere's circle cx,cy,r in pixels from the image's top-left pixel centre");
+                 "JSON report: the model, each sphere (detected and refined) with every "
+                 "light's highlight, blob shape, residual and confidence; per light the "
+                 "direction (position), residual, confidence and flags");
+  sp->add_option("--sphere", sphere->spheres,
+                 "A sphere's circle cx,cy,r in pixels from the image's top-left pixel centre; "
+                 "once per sphere")
+      ->expected(1)
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  sp->add_option("--spheres", sphere->sphere_count,
+                 "How many spheres to find when no --sphere is given")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  sp->add_option("--sphere-radius-mm", sphere->sphere_radius_mm,
+                 "The spheres' real radius in mm: with --focal-px and 2+ spheres, light "
+                 "positions are triangulated (near lights; write them with --json)")
+      ->check(CLI::NonNegativeNumber);
+  sp->add_option("--plane", sphere->plane,
+                 "Sample plane (.json with a pose): light positions relative to its centre "
+                 "(default origin: the optical axis at the spheres' mean depth)");
+  sp->add_option("--json", sphere->json,
+                 "Also write every light as JSON (directions, positions in mm)");
+  sp->add_flag("--no-refine", sphere->no_refine,
+               "Skip the joint refinement (per-sphere reflections, linear triangulation)");
+  sp->add_option("--outlier-px", sphere->outlier_px,
+                 "A highlight residual above this (pixels) flags the light as an outlier")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  sp->add_flag("--drop-outliers", sphere->drop_outliers,
+               "Leave the lights flagged as outliers out of the light file");
   sp->add_option("--mask", sphere->mask, "A mask image of the sphere (pixels > 0.5)");
   sp->add_option("--focal-px", sphere->options.camera.focal_px,
                  "Focal length in pixels for the perspective model (0 = orthographic)")
@@ -162,9 +231,10 @@ void add_calibrate_command(CLI::App& root) {
       ->delimiter(',');
   sp->add_option("--overlays", sphere->overlays,
                  "Folder for one overlay PNG per image: the sphere and the highlight found "
-                 "(green used, red flagged)");
+                 "(green used, orange outlier, red flagged)");
   sp->add_option("--plot", sphere->plot, "Polar plot (PNG) of the light directions");
   sp->callback([sphere] { run_sphere(*sphere); });
+  add_calibrate_board_commands(cmd);
 }
 
 }  // namespace ptmkit::app

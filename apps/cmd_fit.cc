@@ -7,12 +7,17 @@
 
 #include "commands.h"
 #include "progress.h"
+#include "ptmkit/calib/dome.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/plane.h"
+#include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/fit.h"
+#include "ptmkit/fit/model_select.h"
 #include "ptmkit/texture/ptm.h"
+#include "ptmkit/texture/rti.h"
 
 namespace fs = std::filesystem;
 
@@ -33,7 +38,38 @@ struct FitArgs {
   std::string albedo;
   std::string labels;
   fit::FitOptions options;
+  // --model: ptm (default), auto, hsh2, hsh3, hsh4 (fit/model_select.h, fit/basis.h).
+  std::string model = "ptm";
+  bool format_given = false;
+  std::string lights_json;  // near lights: positions (--lights-json)
+  std::string plane;        // near lights: sample plane (--plane)
 };
+
+// Near lights: the positions of a lights JSON (calib's format: `ptmkit calibrate dome
+// --radius`, `ptmkit synth --dome-radius`) onto the .lp's lights, matched in order; the
+// image names must agree.
+void attach_light_positions(LightSet* lights, const std::string& json_path) {
+  const LightSet json = calib::read_dome_json(json_path);
+  if (json.size() != lights->size()) {
+    throw Error(json_path + ": " + std::to_string(json.size()) + " lights but the light file has " +
+                std::to_string(lights->size()));
+  }
+  for (std::size_t i = 0; i < json.size(); ++i) {
+    const Light& j = json.lights[i];
+    Light& l = lights->lights[i];
+    if (j.image.filename() != l.image.filename()) {
+      throw Error(json_path + ": light " + std::to_string(i + 1) + " is " +
+                  j.image.filename().string() + " but the light file's is " +
+                  l.image.filename().string());
+    }
+    if (!j.position_mm) {
+      throw Error(json_path + ": light " + std::to_string(i + 1) +
+                  " has no position_mm (directions only describe distant lights; give "
+                  "\"radius_mm\" or each light's \"position_mm\")");
+    }
+    l.position_mm = j.position_mm;
+  }
+}
 
 // Checks an output map's extension before the fit runs (no work lost on a typo).
 void check_map_path(const std::string& path, const char* flag, bool png_ok) {
@@ -41,6 +77,77 @@ void check_map_path(const std::string& path, const char* flag, bool png_ok) {
   const auto ext = fs::path(path).extension();
   if (ext == ".exr" || (png_ok && ext == ".png")) return;
   throw Error(path + ": " + flag + " must be an .exr file" + (png_ok ? " or a .png file" : ""));
+}
+
+// --model other than ptm: chooses the model (auto) and fits an HSH basis into an .rti. Returns
+// false when the PTM is to be fitted (auto chose it; options->model is then its colour model).
+bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* model_json) {
+  const fs::path out_path(args.output);
+  const LightSet lights = read_lp(args.lights);
+  fit::Basis basis = fit::Basis::kPtm;
+  ColourModel colour = options->model;
+  if (args.model == "auto") {
+    fit::ModelSelectOptions sel;
+    sel.design = options->design;
+    if (args.format_given) sel.colours = {options->model};
+    const fit::ModelReport report = fit::select_model(lights, sel);
+    std::printf("model selection: %d texels (every %d px), %d folds over %d lights, %.2f s\n%s",
+                report.texels, report.stride, report.folds, report.lights, report.seconds,
+                report.table().c_str());
+    *model_json = report.to_json();
+    basis = report.choice().basis;
+    colour = report.choice().colour;
+  } else {
+    basis = fit::parse_basis(args.model);
+  }
+  const char* want = basis == fit::Basis::kPtm ? ".ptm" : ".rti";
+  if (out_path.extension() != want) {
+    throw Error(out_path.string() + ": the " + std::string(fit::to_string(basis)) +
+                " model is written as a " + want + " file: use -o NAME" + want);
+  }
+  if (basis == fit::Basis::kPtm) {
+    options->model = colour;
+    return false;
+  }
+  if (!fit::is_shared_solver(fit::parse_solver(args.solver))) {
+    throw Error("--solver " + args.solver + " is only available with the ptm model");
+  }
+  if (!args.residual_map.empty() || !args.outlier_map.empty() || !args.normals.empty() ||
+      !args.albedo.empty() || !args.labels.empty()) {
+    throw Error(
+        "--residual-map, --outlier-map, --normals, --albedo and --labels go with the "
+        "ptm model");
+  }
+  fit::BasisFitOptions bo;
+  bo.basis = basis;
+  bo.model = colour;
+  bo.design = options->design;
+  bo.threads = options->threads;
+  bo.band_rows = options->band_rows;
+  bo.progress = make_progress("fit");
+  fit::BasisMap map;
+  const fit::BasisFitReport report = fit::fit_basis_capture(lights, bo, &map);
+  texture::RtiMap rti(map.width, map.height, map.terms(), map.colour_space);
+  rti.coeffs = std::move(map.coeffs);
+  const texture::RtiWriteReport written = texture::write_rti(out_path, rti);
+  if (!args.report.empty()) {
+    nlohmann::json j = nlohmann::json::parse(report.to_json());
+    j["input"] = fs::absolute(args.lights).lexically_normal().string();
+    j["output"] = fs::absolute(out_path).lexically_normal().string();
+    j["quantisation"] = {{"file_bytes", written.file_bytes},
+                         {"max_coeff_error", written.max_coeff_error},
+                         {"rms_coeff_error", written.rms_coeff_error}};
+    if (!model_json->empty()) j["model_selection"] = nlohmann::json::parse(*model_json);
+    write_file_atomic(args.report, j.dump(2) + "\n");
+  }
+  std::printf(
+      "fit: %d lights, %dx%d, %s %s (%d terms), cond(A) %.3g, residual rms %.2f grey, "
+      "%.3f s\nwrote %s (%zu bytes)\n",
+      report.lights, report.width, report.height, std::string(fit::to_string(basis)).c_str(),
+      std::string(to_string(report.model)).c_str(), fit::basis_terms(basis),
+      report.condition_number, report.residual_rms_grey, report.total_seconds,
+      out_path.string().c_str(), written.file_bytes);
+  return true;
 }
 
 void run_fit(const FitArgs& args) {
@@ -51,6 +158,11 @@ void run_fit(const FitArgs& args) {
   } else if (args.precision != "float") {
     throw Error("--precision must be float or double, got '" + args.precision + "'");
   }
+  std::string model_json;  // --model auto's evidence
+  if (args.model != "ptm" && (!args.plane.empty() || !args.lights_json.empty())) {
+    throw Error("--plane and --lights-json (near lights) work with --model ptm only so far");
+  }
+  if (args.model != "ptm" && run_model_fit(args, &options, &model_json)) return;
   const fs::path out_path(args.output);
   if (out_path.extension() != ".ptm") {
     throw Error(out_path.string() + ": the output must be a .ptm file");
@@ -73,7 +185,9 @@ void run_fit(const FitArgs& args) {
     options.outputs = &outputs;
   }
   options.progress = make_progress("fit");
-  const LightSet lights = read_lp(args.lights);
+  LightSet lights = read_lp(args.lights);
+  if (!args.lights_json.empty()) attach_light_positions(&lights, args.lights_json);
+  if (!args.plane.empty()) options.near.plane = read_plane_json(args.plane);
   texture::PtmStreamWriter writer(out_path);
   const fit::FitReport report = fit::fit_capture(lights, options, writer);
   const ImageWriteOptions exr{PixelFormat::kF32};
@@ -96,6 +210,7 @@ void run_fit(const FitArgs& args) {
     nlohmann::json j = nlohmann::json::parse(report.to_json());
     j["input"] = fs::absolute(args.lights).lexically_normal().string();
     j["output"] = fs::absolute(out_path).lexically_normal().string();
+    if (!model_json.empty()) j["model_selection"] = nlohmann::json::parse(model_json);
     j["quantisation"] = {
         {"file_bytes", ptm.file_bytes},
         {"max_coeff_error", ptm.max_coeff_error},
@@ -112,6 +227,15 @@ void run_fit(const FitArgs& args) {
       report.lights, report.width, report.height, std::string(to_string(report.model)).c_str(),
       report.design.condition_number, report.residuals.rms_grey, report.residuals.p99_abs_grey,
       report.total_seconds, report.texels_per_second() / 1e6, report.threads);
+  if (report.light_model.model == "near") {
+    std::printf(
+        "near lights: per-texel directions (spread up to %.2f deg), fall-off %.3f..%.3f%s\n",
+        report.light_model.max_spread_deg, report.light_model.min_falloff,
+        report.light_model.max_falloff,
+        report.light_model.falloff_corrected ? " corrected" : " not corrected");
+  } else if (!report.light_model.note.empty()) {
+    std::printf("%s\n", report.light_model.note.c_str());
+  }
   if (!fit::is_shared_solver(report.solver)) {
     const double total = std::max<double>(1.0, static_cast<double>(report.outliers.samples));
     std::printf("solver %s: %.2f%% samples shadow, %.2f%% highlight, %llu fallback texels\n",
@@ -135,7 +259,16 @@ void add_fit_command(CLI::App& root) {
       "the least-squares biquadratic in the light direction. Writes a PTM 1.2 file.");
   cmd->add_option("lights", args->lights, "Light file (.lp); its images are the capture")
       ->required();
-  cmd->add_option("-o,--output", args->output, "Output .ptm file")->required();
+  cmd->add_option("-o,--output", args->output,
+                  "Output file: .ptm for the ptm model, .rti for hsh2/3/4")
+      ->required();
+  cmd->add_option("--model", args->model,
+                  "Basis: ptm (the 6-term polynomial, .ptm output), hsh2, hsh3, hsh4 "
+                  "(hemispherical harmonics, 4/9/16 terms, .rti output), or auto (chosen per "
+                  "capture from held-out error with a complexity penalty; with --format only "
+                  "the basis is chosen). See docs/MODELS.md")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"ptm", "auto", "hsh2", "hsh3", "hsh4"}));
   cmd->add_option("--format", args->format,
                   "Colour model: rgb (three polynomials, PTM_FORMAT_RGB), lrgb (luminance "
                   "polynomial times per-texel colour, PTM_FORMAT_LRGB), ycc (the seed paper: "
@@ -182,6 +315,12 @@ void add_fit_command(CLI::App& root) {
                   "highlights")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--readmit-k", args->options.robust.readmit_k,
+                  "sign/lambert: after the fit, re-admit rejected samples within this many "
+                  "robust scales of it and refit (0 = off). Raises label precision, costs "
+                  "truth PSNR (docs/SOLVERS.md)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--dark-fraction", args->options.robust.dark_fraction,
                   "trim/sign/lambert: samples darker than this fraction of the texel's "
                   "75th-percentile sample are shadows")
@@ -204,9 +343,23 @@ void add_fit_command(CLI::App& root) {
                   "Write each sample's label into this folder: one 8-bit PNG per light, named "
                   "after its photograph, 0 inlier, 1 shadow, 2 highlight (the codes of `ptmkit "
                   "synth`'s truth/labels; all 0 for least-squares solvers)");
+  cmd->add_option("--lights-json", args->lights_json,
+                  "Near lights: a lights JSON with each light's position_mm (as written by "
+                  "`ptmkit calibrate dome --radius` or `ptmkit synth --dome-radius`), matched to "
+                  "the light file's lights in order");
+  cmd->add_option("--plane", args->plane,
+                  "Near lights: the sample plane (plane.json: pixel -> plane mm). With "
+                  "--lights-json, every texel is fitted with its own light directions (solvers "
+                  "ls and ridge only)");
+  cmd->add_flag("--falloff", args->options.near.falloff,
+                "Near lights: divide out the inverse-square fall-off relative to the plane "
+                "centre (needs --plane and --lights-json)");
   cmd->add_flag("!--no-residuals", args->options.residual_stats,
                 "Skip the residual statistics (saves about half the fit arithmetic)");
-  cmd->callback([args] { run_fit(*args); });
+  cmd->callback([args, cmd] {
+    args->format_given = cmd->count("--format") > 0;
+    run_fit(*args);
+  });
 }
 
 }  // namespace ptmkit::app

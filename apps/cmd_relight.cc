@@ -16,6 +16,7 @@
 #include "ptmkit/texture/ptm.h"
 #include "ptmkit/texture/ptm8.h"
 #include "ptmkit/texture/relight.h"
+#include "ptmkit/texture/rti.h"
 
 namespace fs = std::filesystem;
 
@@ -58,6 +59,14 @@ Eigen::Vector3d parse_light(const std::string& text) {
   return v;
 }
 
+// .rti (HSH) by extension, or by content for other names; .ptm otherwise.
+bool is_rti(const std::string& path) {
+  const fs::path p(path);
+  if (p.extension() == ".rti") return true;
+  if (p.extension() == ".ptm") return false;
+  return texture::looks_like_rti(p);
+}
+
 void run_relight(const RelightArgs& args) {
   const bool one = !args.light.empty();
   if (one == !args.lights.empty()) {
@@ -93,6 +102,16 @@ void run_relight(const RelightArgs& args) {
     } catch (const Error& e) {
       throw Error(std::string("--light: ") + e.what());
     }
+    if (is_rti(args.input)) {
+      if (args.integer) throw Error(args.input + ": --integer needs a .ptm (it is an .rti)");
+      const texture::RtiMap rti = texture::read_rti(args.input, space);
+      const Image image = texture::relight(rti, dir, relight_options);
+      write_image(args.output, image.view(), write);
+      std::printf("relit %s (%d x %d, HSH %d terms) from (%.4f, %.4f, %.4f): wrote %s\n",
+                  args.input.c_str(), rti.width, rti.height, rti.terms, dir.x(), dir.y(), dir.z(),
+                  args.output.c_str());
+      return;
+    }
     const CoefficientMap map = texture::read_ptm(args.input, space);
     if (dir.z() <= 0.0) {
       std::fprintf(stderr,
@@ -118,14 +137,16 @@ void run_relight(const RelightArgs& args) {
   }
 
   const LightSet lights = read_lp(args.lights);
-  const CoefficientMap map = texture::read_ptm(args.input, space);
   texture::RelightSetOptions options;
   options.out_dir = args.out_dir;
   options.relight = relight_options;
   options.write = write;
   options.mask = args.mask;
   options.report_json = args.report;
-  const texture::RelightSetReport report = texture::relight_light_set(map, lights, options);
+  const texture::RelightSetReport report =
+      is_rti(args.input)
+          ? texture::relight_light_set(texture::read_rti(args.input, space), lights, options)
+          : texture::relight_light_set(texture::read_ptm(args.input, space), lights, options);
   for (const auto& e : report.entries) {
     if (e.compared) {
       std::printf("  %-32s PSNR %6.2f dB  mean abs %6.2f grey\n",
@@ -143,9 +164,11 @@ void add_relight_command(CLI::App& root) {
   auto args = std::make_shared<RelightArgs>();
   CLI::App* cmd = root.add_subcommand(
       "relight",
-      "Relight a .ptm: one image lit from --light x,y,z, or one image per light of a .lp "
+      "Relight a .ptm or an HSH .rti: one image lit from --light x,y,z, or one image per light of "
+      "a .lp "
       "(--lights) compared with that light's photo where it exists (PSNR, mean abs error).");
-  cmd->add_option("input", args->input, "Polynomial texture map (.ptm)")->required();
+  cmd->add_option("input", args->input, "Texture: polynomial texture map (.ptm) or HSH .rti")
+      ->required();
   auto* light = cmd->add_option(
       "--light", args->light,
       "Direction toward the light, x,y,z in the light frame (x right, y up the image, z toward "

@@ -34,6 +34,9 @@ struct SynthFlags {
   bool no_shadows = false;
   bool no_truth = false;
   int threads = 0;
+  double dome_radius_mm = 0.0;
+  double mm_per_px = 0.0;
+  bool no_falloff = false;
 };
 
 }  // namespace
@@ -81,6 +84,16 @@ void add_synth_command(CLI::App& root) {
       cmd->add_flag("--no-truth", flags->no_truth, "Write only the images and lights.lp");
   cmd->add_option("--threads", flags->threads, "Worker threads (0 = all cores)")
       ->capture_default_str();
+  auto* dome_radius = cmd->add_option(
+      "--dome-radius", flags->dome_radius_mm,
+      "Near lights: dome radius in mm (0 = distant lights, the default). Each light sits at "
+      "radius x direction above the plane centre; writes lights.json (positions) and "
+      "plane.json beside lights.lp");
+  auto* mm_per_px = cmd->add_option("--mm-per-px", flags->mm_per_px,
+                                    "Scene scale on the sample plane, mm per pixel (default "
+                                    "0.5: 256 px span 128 mm)");
+  auto* no_falloff =
+      cmd->add_flag("--no-falloff", flags->no_falloff, "Near lights: no inverse-square fall-off");
 
   cmd->callback([=]() {
     const SynthFlags& f = *flags;
@@ -117,6 +130,9 @@ void add_synth_command(CLI::App& root) {
     if (height_frac->count() > 0) o.relief.relief_height_frac = f.height_frac;
     if (no_shadows->count() > 0) o.cast_shadows = false;
     if (no_truth->count() > 0) o.write_truth = false;
+    if (dome_radius->count() > 0) o.dome_radius_mm = f.dome_radius_mm;
+    if (mm_per_px->count() > 0) o.mm_per_px = f.mm_per_px;
+    if (no_falloff->count() > 0) o.inverse_square_falloff = false;
     if (f.threads < 0) throw Error("synth: --threads must be >= 0");
 
     ThreadLimit limit(f.threads);

@@ -15,5 +15,6 @@ void add_render_command(CLI::App& root);
 void add_direct_command(CLI::App& root);
 void add_compare_command(CLI::App& root);
 void add_calibrate_command(CLI::App& root);
+void add_calibrate_board_commands(CLI::App* calibrate);  // calibrate camera, calibrate plane
 
 }  // namespace ptmkit::app

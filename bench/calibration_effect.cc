@@ -52,8 +52,8 @@ int main(int argc, char** argv) {
     const study::AngleStats err = study::angle_stats(row.dirs, lights);
     const study::RelightScore s =
         study::score(capture, study::fit_with(capture, row.dirs), reference);
-    std::printf("| %s | %.3f / %.3f | %.2f | %.3f |\n", row.name.c_str(), err.mean_deg,
-                err.max_deg, s.psnr_db, s.mean_change_grey);
+    std::printf("| %s | %.3f / %.3f | %.2f | %.3f |\n", row.name.c_str(), err.mean_deg, err.max_deg,
+                s.psnr_db, s.mean_change_grey);
   }
   return 0;
 }

@@ -164,15 +164,14 @@ inline CoefficientMap fit_with(const Capture& c, const std::vector<Eigen::Vector
 }
 
 struct RelightScore {
-  double psnr_db = 0.0;        // against the diffuse truth at the held-out lights (lit samples)
+  double psnr_db = 0.0;         // against the diffuse truth at the held-out lights (lit samples)
   double mean_change_grey = 0;  // mean |relit - relit with the true lights|, grey levels
 };
 
 inline RelightScore score(const Capture& c, const CoefficientMap& fit,
                           const CoefficientMap& reference) {
   RelightScore s;
-  s.psnr_db =
-      fit::psnr_against_truth(fit, c.test_lights, c.test_diffuse, c.scene.normals).psnr_db;
+  s.psnr_db = fit::psnr_against_truth(fit, c.test_lights, c.test_diffuse, c.scene.normals).psnr_db;
   double sum = 0.0;
   std::uint64_t n = 0;
   for (const auto& l : c.test_lights) {

@@ -37,7 +37,9 @@ std::vector<Expected> read_expected(const fs::path& path) {
     const int n = std::sscanf(line.c_str(), "%d, (%lf %lf), (%lf %lf), (%lf %lf), (%lf %lf)", &e.id,
                               &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &v[6], &v[7]);
     if (n != 9) ADD_FAILURE() << path << ": cannot parse '" << line << "'";
-    for (int k = 0; k < 4; ++k) e.corners[k] = {v[2 * k], v[2 * k + 1]};
+    // The files are in the library's pixel convention (centres at +0.5); detect_tags reports
+    // OpenCV's (centres at integers).
+    for (int k = 0; k < 4; ++k) e.corners[k] = {v[2 * k] - 0.5, v[2 * k + 1] - 0.5};
     out.push_back(e);
   }
   return out;

@@ -111,5 +111,31 @@ TEST(CalibDome, CommandWritesTheLightFileAndJsonOrNothing) {
   EXPECT_EQ(test::run_ptmkit({"calibrate"}).exit_code, 2);
 }
 
+TEST(CalibDome, JsonWrittenWithPositionsReadsBack) {
+  test::ScratchDir dir;
+  DomeOptions o;
+  o.layout = "dome49";
+  o.radius_mm = 450.0;
+  const LightSet written = dome_light_set(o);
+  write_light_set_json(dir / "lights.json", written);
+  const LightSet read = read_dome_json(dir / "lights.json");
+  ASSERT_EQ(read.size(), written.size());
+  for (std::size_t i = 0; i < read.size(); ++i) {
+    ASSERT_TRUE(read.lights[i].position_mm.has_value());
+    EXPECT_LT((*read.lights[i].position_mm - *written.lights[i].position_mm).norm(), 1e-9);
+    EXPECT_LT((read.lights[i].direction - written.lights[i].direction).norm(), 1e-12);
+  }
+  // A direction that does not point at the position is refused.
+  std::ofstream(dir / "bad.json")
+      << R"({"lights": [{"image": "a.png", "direction": [0, 0, 1], "position_mm": [300, 0, 300]}]})";
+  try {
+    (void)read_dome_json(dir / "bad.json");
+    ADD_FAILURE() << "accepted a direction that disagrees with the position";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("bad.json"));
+    EXPECT_THAT(e.what(), HasSubstr("does not point at position_mm"));
+  }
+}
+
 }  // namespace
 }  // namespace ptmkit::calib

@@ -28,9 +28,10 @@ TEST(CalibrationEffect, SphereCalibratedLightsRelightLikeTheTrueOnes) {
   const study::AngleStats err = study::angle_stats(calibrated, f.lights);
   const study::RelightScore truth = f.score(f.lights);
   const study::RelightScore cal = f.score(calibrated);
-  std::printf("sphere r = 100 px: light error mean %.3f max %.3f deg; truth PSNR %.3f dB "
-              "(true lights %.3f); relit change %.3f grey\n",
-              err.mean_deg, err.max_deg, cal.psnr_db, truth.psnr_db, cal.mean_change_grey);
+  std::printf(
+      "sphere r = 100 px: light error mean %.3f max %.3f deg; truth PSNR %.3f dB "
+      "(true lights %.3f); relit change %.3f grey\n",
+      err.mean_deg, err.max_deg, cal.psnr_db, truth.psnr_db, cal.mean_change_grey);
   EXPECT_LE(err.mean_deg, 0.3);
   EXPECT_NEAR(cal.psnr_db, truth.psnr_db, 0.1);
   EXPECT_LT(cal.mean_change_grey, 0.15);
@@ -42,8 +43,8 @@ TEST(CalibrationEffect, RelitChangeGrowsWithTheLightErrorAndSystematicErrorCarri
   const double c2 = f.score(study::perturbed_random(f.lights, 2.0, 11)).mean_change_grey;
   const double c5 = f.score(study::perturbed_random(f.lights, 5.0, 11)).mean_change_grey;
   const double tilt = f.score(study::perturbed_tilt(f.lights, 2.0)).mean_change_grey;
-  std::printf("relit change: random 1/2/5 deg %.3f / %.3f / %.3f grey; 2 deg tilt %.3f grey\n",
-              c1, c2, c5, tilt);
+  std::printf("relit change: random 1/2/5 deg %.3f / %.3f / %.3f grey; 2 deg tilt %.3f grey\n", c1,
+              c2, c5, tilt);
   EXPECT_GT(c1, 0.05);
   EXPECT_LT(c1, c2);
   EXPECT_LT(c2, c5);

@@ -10,6 +10,7 @@
 
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
+#include "ptmkit/calib/sphere_refine.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
@@ -71,6 +72,20 @@ TEST(CalibSphere, OrthographicNoiseFreeWithinATenthOfADegree) {
       known.mean, known.max, detected.mean, detected.max);
   EXPECT_LE(known.mean, 0.1);
   EXPECT_LE(detected.mean, 0.1);
+  // Refined as a rig (one sphere, distant lights: the circle from its outline, each light
+  // from its highlight); a clean render has no outliers.
+  RigOptions rig_options;
+  const RigReport refined = calibrate_rig(images, names, rig_options);
+  Errors e_refined;
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    const double a = angle_deg(refined.lights[i].direction, lights[i]);
+    e_refined.mean += a / static_cast<double>(lights.size());
+    e_refined.max = std::max(e_refined.max, a);
+  }
+  std::printf("  refined (circle found): mean %.4f max %.4f deg, %d outliers\n", e_refined.mean,
+              e_refined.max, refined.outliers());
+  EXPECT_EQ(refined.outliers(), 0);
+  EXPECT_LE(e_refined.mean, 0.1);
 }
 
 TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
@@ -105,7 +120,20 @@ TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
       "deg; orthographic model mean %.3f max %.3f deg\n",
       p.mean, p.max, o.mean, o.max);
   EXPECT_LE(p.mean, 0.5);
-  EXPECT_GT(o.mean, 2.0 * p.mean);  // the orthographic model is measurably worse off-axis
+  EXPECT_GT(o.mean, 2.0 * p.mean);
+  RigOptions rig_options;
+  rig_options.detection = persp;
+  const RigReport refined = calibrate_rig(images, names, rig_options);
+  Errors e_refined;
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    const double a = angle_deg(refined.lights[i].direction, lights[i]);
+    e_refined.mean += a / static_cast<double>(lights.size());
+    e_refined.max = std::max(e_refined.max, a);
+  }
+  std::printf("  refined: mean %.3f max %.3f deg, %d outliers, outline rms %.3f px\n",
+              e_refined.mean, e_refined.max, refined.outliers(), refined.outline_rms_px);
+  EXPECT_EQ(refined.outliers(), 0);
+  EXPECT_LE(e_refined.mean, 0.5);  // the orthographic model is measurably worse off-axis
 }
 
 TEST(CalibSphere, UnusableImagesAreFlaggedNotGuessed) {
@@ -166,6 +194,21 @@ TEST(CalibSphere, RealChromeSphereAgreesWithThePublishedLights) {
   // locators differ by a few pixels; measured 3.1 degrees mean (docs/CALIBRATION.md). A
   // broken estimator (a flipped axis, a wrong circle) is tens of degrees off.
   EXPECT_LE(e.mean, 5.0);
+  RigOptions rig_options;
+  rig_options.spheres = {o.sphere.value()};
+  const RigReport refined = calibrate_rig(images, names, rig_options);
+  Errors e_refined;
+  for (std::size_t i = 0; i < published.size(); ++i) {
+    const double a = angle_deg(refined.lights[i].direction, published[i]);
+    e_refined.mean += a / static_cast<double>(published.size());
+    e_refined.max = std::max(e_refined.max, a);
+  }
+  std::printf("  refined: mean %.2f max %.2f deg; %d outliers\n", e_refined.mean, e_refined.max,
+              refined.outliers());
+  for (const RigLight& l : refined.lights) {
+    if (l.outlier) std::printf("    %s: %s\n", l.image.filename().string().c_str(), l.flag.c_str());
+  }
+  EXPECT_LE(e_refined.mean, 5.0);
 }
 
 TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {

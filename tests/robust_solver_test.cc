@@ -252,3 +252,27 @@ TEST(RobustCli, FitsWithTheRobustSolverAndWritesMapsAndReport) {
 
 }  // namespace
 }  // namespace ptmkit::fit
+
+namespace ptmkit::fit {
+namespace {
+
+// RobustOptions::readmit_k trades truth PSNR for label precision (docs/SOLVERS.md, "Outlier
+// labelling precision"); it is off by default because it costs the default and tall presets
+// their PSNR targets.
+TEST(RobustSolver, ReadmissionRaisesLabelPrecision) {
+  const auto stack = test::render_preset("default", 48);
+  RobustOptions readmit;
+  readmit.readmit_k = 2.5;
+  const auto off = test::score_solver(stack, Solver::kRobust);
+  const auto on = test::score_solver(stack, Solver::kRobust, readmit);
+  ASSERT_GT(on.outliers_lit.true_outliers, 0u);
+  EXPECT_GT(on.outliers_lit.precision, off.outliers_lit.precision + 0.1);
+  EXPECT_LT(on.outliers_lit.labelled, off.outliers_lit.labelled);
+  EXPECT_GE(on.outliers_lit.recall, 0.5);
+  RobustOptions bad;
+  bad.readmit_k = -1.0;
+  EXPECT_FALSE(bad.validate().empty());
+}
+
+}  // namespace
+}  // namespace ptmkit::fit

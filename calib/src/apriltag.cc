@@ -121,9 +121,12 @@ std::vector<TagDetection> detect_tags(ConstImageViewF image, const TagDetectorOp
     t.id = d->id;
     t.hamming = d->hamming;
     t.decision_margin = d->decision_margin;
-    t.centre_px = {d->c[0], d->c[1]};
-    for (int k = 0; k < 4; ++k)
-      t.corners_px[static_cast<std::size_t>(k)] = {d->p[k][0], d->p[k][1]};
+    // The library puts pixel centres at (0.5, 0.5) (its origin is the top-left pixel's outer
+    // corner); ours is the centre of that pixel, as OpenCV's.
+    t.centre_px = {d->c[0] - 0.5, d->c[1] - 0.5};
+    for (int k = 0; k < 4; ++k) {
+      t.corners_px[static_cast<std::size_t>(k)] = {d->p[k][0] - 0.5, d->p[k][1] - 0.5};
+    }
     out.push_back(t);
   }
   apriltag_detections_destroy(raw);

@@ -164,9 +164,18 @@ LightSet read_dome_json(const std::filesystem::path& path, const DomeOptions& de
                   : std::filesystem::path(image_name(o.name_pattern, i));
     const bool has_dir = e.contains("direction");
     const bool has_pos = e.contains("position_mm");
-    if (has_dir == has_pos) throw Error(what + ": give either direction or position_mm");
-    place(&l, vec3(has_dir ? e["direction"] : e["position_mm"], what), has_pos, o.radius_mm,
+    if (!has_dir && !has_pos) throw Error(what + ": give a direction or position_mm");
+    place(&l, vec3(has_pos ? e["position_mm"] : e["direction"], what), has_pos, o.radius_mm,
           o.yaw_deg, what);
+    if (has_dir && has_pos) {
+      // Both (as write_light_set_json writes them): the position rules; the direction must be
+      // the one toward it from the plane centre.
+      const Eigen::Vector3d d = vec3(e["direction"], what);
+      if (d.norm() < 1e-12 ||
+          rotate_yaw(d, o.yaw_deg).normalized().dot(l.direction) < std::cos(0.01)) {
+        throw Error(what + ": direction does not point at position_mm from the plane centre");
+      }
+    }
     if (e.contains("intensity")) {
       if (!e["intensity"].is_number() || !(e["intensity"].get<double>() > 0.0)) {
         throw Error(what + ": intensity must be a positive number");

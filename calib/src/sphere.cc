@@ -108,7 +108,9 @@ Circle circle_from_mask(ConstImageViewF mask) {
   return c;
 }
 
-Circle find_sphere(const std::vector<Image>& images) {
+namespace {
+
+cv::Mat max_composite(const std::vector<Image>& images) {
   if (images.empty()) throw Error("find sphere: no images");
   const int w = images[0].width(), h = images[0].height();
   cv::Mat composite(h, w, CV_32F, cv::Scalar(0.0f));
@@ -120,22 +122,24 @@ Circle find_sphere(const std::vector<Image>& images) {
       }
     }
   }
+  return composite;
+}
+
+std::vector<cv::Vec3f> hough_circles(const cv::Mat& composite) {
   cv::Mat grey8;
   composite.convertTo(grey8, CV_8U, 255.0);
   cv::GaussianBlur(grey8, grey8, cv::Size(5, 5), 1.5);
   std::vector<cv::Vec3f> circles;
-  const int min_side = std::min(w, h);
+  const int min_side = std::min(composite.cols, composite.rows);
   cv::HoughCircles(grey8, circles, cv::HOUGH_GRADIENT, 1.0, min_side / 4.0, 100.0, 30.0,
                    std::max(8, min_side / 20), min_side / 2);
-  if (circles.empty()) {
-    throw Error(
-        "no sphere found in the images: give its circle with --sphere cx,cy,r (pixels) "
-        "or a mask with --mask");
-  }
-  Circle rough;
-  rough.centre_px = {circles[0][0], circles[0][1]};
-  rough.radius_px = circles[0][2];
-  // Sub-pixel edge along rays: the largest radial derivative of the composite near the rim.
+  return circles;
+}
+
+// Sub-pixel edge along rays from a rough circle: the largest radial derivative of the
+// composite near the rim, then a trimmed geometric circle fit.
+Circle refine_circle(const Circle& rough, const cv::Mat& composite) {
+  const int w = composite.cols, h = composite.rows;
   cv::Mat smooth;
   cv::GaussianBlur(composite, smooth, cv::Size(0, 0), 1.0);
   std::vector<Eigen::Vector2d> edge;
@@ -191,6 +195,53 @@ Circle find_sphere(const std::vector<Image>& images) {
   return c;
 }
 
+}  // namespace
+
+Circle find_sphere(const std::vector<Image>& images) {
+  const cv::Mat composite = max_composite(images);
+  const std::vector<cv::Vec3f> circles = hough_circles(composite);
+  if (circles.empty()) {
+    throw Error(
+        "no sphere found in the images: give its circle with --sphere cx,cy,r (pixels) "
+        "or a mask with --mask");
+  }
+  Circle rough;
+  rough.centre_px = {circles[0][0], circles[0][1]};
+  rough.radius_px = circles[0][2];
+  return refine_circle(rough, composite);
+}
+
+std::vector<Circle> find_spheres(const std::vector<Image>& images, int count) {
+  if (count < 1) throw Error("find spheres: the count must be at least 1");
+  if (count == 1) return {find_sphere(images)};
+  const cv::Mat composite = max_composite(images);
+  const std::vector<cv::Vec3f> circles = hough_circles(composite);
+  std::vector<Circle> out;
+  for (const cv::Vec3f& c : circles) {  // strongest first
+    Circle rough;
+    rough.centre_px = {c[0], c[1]};
+    rough.radius_px = c[2];
+    const bool overlaps = std::any_of(out.begin(), out.end(), [&](const Circle& o) {
+      return (o.centre_px - rough.centre_px).norm() < o.radius_px + rough.radius_px;
+    });
+    if (overlaps) continue;
+    out.push_back(refine_circle(rough, composite));
+    if (static_cast<int>(out.size()) == count) break;
+  }
+  if (static_cast<int>(out.size()) < count) {
+    throw Error("found " + std::to_string(out.size()) + " of " + std::to_string(count) +
+                " spheres in the images: give each circle with --sphere cx,cy,r (pixels), "
+                "once per sphere");
+  }
+  std::sort(out.begin(), out.end(), [](const Circle& a, const Circle& b) {
+    if (std::abs(a.centre_px.x() - b.centre_px.x()) > 0.5 * std::min(a.radius_px, b.radius_px)) {
+      return a.centre_px.x() < b.centre_px.x();
+    }
+    return a.centre_px.y() < b.centre_px.y();
+  });
+  return out;
+}
+
 std::string SphereOptions::validate() const {
   if (!(blob_fraction > 0.0 && blob_fraction < 1.0)) return "blob_fraction must be in (0, 1)";
   if (!(min_peak >= 0.0 && min_peak < 1.0)) return "min_peak must be in [0, 1)";
@@ -210,19 +261,14 @@ int SphereReport::usable() const {
       std::count_if(lights.begin(), lights.end(), [](const SphereLight& l) { return l.found; }));
 }
 
-Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& camera,
-                                  const Eigen::Vector2d& h, int width, int height) {
-  if (camera.focal_px <= 0.0) {
-    Eigen::Vector3d n((h.x() - sphere.centre_px.x()) / sphere.radius_px,
-                      -(h.y() - sphere.centre_px.y()) / sphere.radius_px, 0.0);
-    n.z() = std::sqrt(std::max(0.0, 1.0 - n.x() * n.x() - n.y() * n.y()));
-    n.normalize();
-    const Eigen::Vector3d v(0.0, 0.0, 1.0);
-    return (2.0 * n.dot(v) * n - v).normalized();
-  }
-  // Pinhole, camera frame x right, y down, z forward; sphere of unit radius.
-  const Eigen::Vector2d pp =
-      camera.principal_px.value_or(Eigen::Vector2d(0.5 * (width - 1), 0.5 * (height - 1)));
+Eigen::Vector2d principal_point(const SphereCamera& camera, int width, int height) {
+  return camera.principal_px.value_or(Eigen::Vector2d(0.5 * (width - 1), 0.5 * (height - 1)));
+}
+
+Eigen::Vector3d sphere_centre_in_camera(const Circle& sphere, const SphereCamera& camera, int width,
+                                        int height) {
+  if (!(camera.focal_px > 0.0)) throw Error("sphere centre in the camera: needs a focal length");
+  const Eigen::Vector2d pp = principal_point(camera, width, height);
   const double f = camera.focal_px;
   auto ray = [&](const Eigen::Vector2d& px) {
     return Eigen::Vector3d((px.x() - pp.x()) / f, (px.y() - pp.y()) / f, 1.0).normalized();
@@ -232,6 +278,7 @@ Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& came
   // distance to the centre is then R / sin(alpha) (R = 1).
   std::vector<Eigen::Vector2d> outline = sphere.outline_px;
   if (outline.size() < 8) {
+    outline.clear();
     for (int k = 0; k < 72; ++k) {
       const double a = 2.0 * std::numbers::pi * k / 72.0;
       outline.push_back(sphere.centre_px +
@@ -265,8 +312,25 @@ Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& came
   }
   const Eigen::Vector3d axis = wcone.normalized();
   const double cos_alpha = std::clamp(1.0 / wcone.norm(), 0.0, 1.0 - 1e-12);
-  const Eigen::Vector3d centre = axis / std::sqrt(1.0 - cos_alpha * cos_alpha);
-  const Eigen::Vector3d d = ray(h);
+  return axis / std::sqrt(1.0 - cos_alpha * cos_alpha);
+}
+
+Eigen::Vector3d reflect_highlight(const Circle& sphere, const SphereCamera& camera,
+                                  const Eigen::Vector2d& h, int width, int height) {
+  if (camera.focal_px <= 0.0) {
+    Eigen::Vector3d n((h.x() - sphere.centre_px.x()) / sphere.radius_px,
+                      -(h.y() - sphere.centre_px.y()) / sphere.radius_px, 0.0);
+    n.z() = std::sqrt(std::max(0.0, 1.0 - n.x() * n.x() - n.y() * n.y()));
+    n.normalize();
+    const Eigen::Vector3d v(0.0, 0.0, 1.0);
+    return (2.0 * n.dot(v) * n - v).normalized();
+  }
+  // Pinhole, camera frame x right, y down, z forward; sphere of unit radius.
+  const Eigen::Vector2d pp = principal_point(camera, width, height);
+  const double f = camera.focal_px;
+  const Eigen::Vector3d centre = sphere_centre_in_camera(sphere, camera, width, height);
+  const Eigen::Vector3d d =
+      Eigen::Vector3d((h.x() - pp.x()) / f, (h.y() - pp.y()) / f, 1.0).normalized();
   const double bq = d.dot(centre);
   const double disc = bq * bq - (centre.squaredNorm() - 1.0);
   const double t = bq - std::sqrt(std::max(0.0, disc));  // near side (grazing if disc < 0)
@@ -328,15 +392,14 @@ SphereReport calibrate_sphere(const std::vector<Image>& images,
     std::vector<std::uint8_t> seen(static_cast<std::size_t>(w) * h, 0);
     std::vector<std::pair<int, int>> stack{{px, py}};
     seen[static_cast<std::size_t>(py) * w + px] = 1;
-    double sw = 0.0, sx = 0.0, sy = 0.0;
+    // Weighted samples (x, y, weight) that locate the highlight and give its shape.
+    std::vector<Eigen::Vector3d> samples;
     while (!stack.empty()) {
       const auto [x, y] = stack.back();
       stack.pop_back();
       const double v = luma_at(view, x, y);
       const double wgt = light.saturated ? (v >= 0.995 ? 1.0 : 0.0) : v - threshold;
-      sw += wgt;
-      sx += wgt * x;
-      sy += wgt * y;
+      samples.emplace_back(x, y, wgt);
       ++light.blob_pixels;
       const int nx[4] = {x + 1, x - 1, x, x};
       const int ny[4] = {y, y, y + 1, y - 1};
@@ -347,6 +410,13 @@ SphereReport calibrate_sphere(const std::vector<Image>& images,
         mark = 1;
         stack.emplace_back(nx[k], ny[k]);
       }
+    }
+    int bx0 = w, by0 = h, bx1 = -1, by1 = -1;
+    for (const auto& q : samples) {
+      bx0 = std::min(bx0, static_cast<int>(q.x()));
+      bx1 = std::max(bx1, static_cast<int>(q.x()));
+      by0 = std::min(by0, static_cast<int>(q.y()));
+      by1 = std::max(by1, static_cast<int>(q.y()));
     }
     // A highlight is often only a few pixels wide, so a centroid over the blob's own pixels
     // snaps toward pixel centres. Instead: every pixel within two of the blob, weighted by its
@@ -362,28 +432,51 @@ SphereReport calibrate_sphere(const std::vector<Image>& images,
       std::nth_element(level.begin(), level.begin() + static_cast<std::ptrdiff_t>(level.size() / 2),
                        level.end());
       const double base = level[level.size() / 2];
-      int bx0 = w, by0 = h, bx1 = -1, by1 = -1;
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          if (!seen[static_cast<std::size_t>(y) * w + x]) continue;
-          bx0 = std::min(bx0, x);
-          bx1 = std::max(bx1, x);
-          by0 = std::min(by0, y);
-          by1 = std::max(by1, y);
-        }
-      }
-      sw = sx = sy = 0.0;
+      samples.clear();
       for (int y = std::max(0, by0 - 2); y <= std::min(h - 1, by1 + 2); ++y) {
         for (int x = std::max(0, bx0 - 2); x <= std::min(w - 1, bx1 + 2); ++x) {
           if (!on_sphere(x, y)) continue;
-          const double wgt = std::max(0.0, luma_at(view, x, y) - base);
-          sw += wgt;
-          sx += wgt * x;
-          sy += wgt * y;
+          samples.emplace_back(x, y, std::max(0.0, luma_at(view, x, y) - base));
         }
       }
     }
+    double sw = 0.0, sx = 0.0, sy = 0.0;
+    for (const auto& q : samples) {
+      sw += q.z();
+      sx += q.z() * q.x();
+      sy += q.z() * q.y();
+    }
     light.highlight_px = sw > 0.0 ? Eigen::Vector2d(sx / sw, sy / sw) : Eigen::Vector2d(px, py);
+    if (sw > 0.0) {
+      Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+      for (const auto& q : samples) {
+        const Eigen::Vector2d d = q.head<2>() - light.highlight_px;
+        m += q.z() * d * d.transpose();
+      }
+      m /= sw;
+      const double tr = m.trace(), det = m(0, 0) * m(1, 1) - m(0, 1) * m(1, 0);
+      const double disc = std::sqrt(std::max(0.0, 0.25 * tr * tr - det));
+      light.blob_major_px = std::sqrt(std::max(0.0, 0.5 * tr + disc));
+      light.blob_minor_px = std::sqrt(std::max(0.0, 0.5 * tr - disc));
+      // Image y points down; the angle is measured toward the image top.
+      light.blob_angle_deg =
+          -0.5 * std::atan2(2.0 * m(0, 1), m(0, 0) - m(1, 1)) * 180.0 / std::numbers::pi;
+    }
+    {
+      // A second candidate: the brightest pixel on the sphere clear of the blob.
+      const int margin = std::max({3, bx1 - bx0 + 1, by1 - by0 + 1});
+      double second = 0.0;
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          if (!on_sphere(x, y)) continue;
+          if (x >= bx0 - margin && x <= bx1 + margin && y >= by0 - margin && y <= by1 + margin) {
+            continue;
+          }
+          second = std::max(second, luma_at(view, x, y));
+        }
+      }
+      light.second_peak = second;
+    }
     if (light.blob_pixels > options.max_blob_area_fraction * sphere_area) {
       light.flag = "highlight blob covers " + std::to_string(light.blob_pixels) +
                    " pixels: not a compact highlight (a reflection of the scene?)";
@@ -422,7 +515,13 @@ std::string SphereReport::to_json() const {
                         {"highlight_px", {l.highlight_px.x(), l.highlight_px.y()}},
                         {"peak", l.peak},
                         {"blob_pixels", l.blob_pixels},
-                        {"saturated", l.saturated}};
+                        {"saturated", l.saturated},
+                        {"blob_axes_px", {l.blob_major_px, l.blob_minor_px}},
+                        {"blob_angle_deg", l.blob_angle_deg},
+                        {"second_peak", l.second_peak},
+                        {"residual_px", l.residual_px},
+                        {"confidence", l.confidence},
+                        {"outlier", l.outlier}};
     if (l.found) e["direction"] = {l.direction.x(), l.direction.y(), l.direction.z()};
     if (!l.flag.empty()) e["flag"] = l.flag;
     j["lights"].push_back(e);
@@ -485,13 +584,16 @@ Image sphere_overlay(const Image& image, const SphereReport& report, std::size_t
              cv::Scalar(255, 200, 0), 1, cv::LINE_AA, kShift);
   cv::drawMarker(m, to_point(s.centre_px, 0), cv::Scalar(255, 200, 0), cv::MARKER_CROSS, 9, 1);
   const SphereLight& l = report.lights.at(light_index);
-  const cv::Scalar colour = l.found ? cv::Scalar(0, 220, 0) : cv::Scalar(0, 0, 255);
+  // Green: used; orange: used but doubtful (an outlier); red: not used.
+  const cv::Scalar colour = !l.found    ? cv::Scalar(0, 0, 255)
+                            : l.outlier ? cv::Scalar(0, 150, 255)
+                                        : cv::Scalar(0, 220, 0);
   if (l.peak > 0.0) {
     cv::circle(m, to_point(l.highlight_px, kShift), 6 << kShift, colour, 1, cv::LINE_AA, kShift);
     cv::drawMarker(m, to_point(l.highlight_px, 0), colour, cv::MARKER_CROSS, 5, 1);
   }
   std::string text = std::to_string(light_index) + ": " + l.image.filename().string();
-  if (!l.found) text += " - " + l.flag;
+  if (!l.found || l.outlier) text += " - " + l.flag;
   cv::putText(m, text, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv::LINE_AA);
   return from_bgr8(m);
 }

@@ -152,7 +152,11 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
     spec.attribute("Compression",
                    "jpeg:" + std::to_string(std::clamp(options.jpeg_quality, 1, 100)));
   }
-  if (ext == ".exr") spec.attribute("compression", "zip");
+  if (ext == ".exr") {
+    spec.attribute("compression", "zip");
+    // Otherwise the writer stamps the current time (capDate): same input, different bytes.
+    spec.attribute("DateTime", "");
+  }
   if (!out->open(out_file.temp_path().string(), spec)) {
     throw Error(where(path) + ": cannot open for writing: " + out->geterror());
   }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -39,6 +40,7 @@ constexpr int kHistBins = 5121;
 struct RowStats {
   bool active = false;  // this row is in the residual-statistics sample
   OutlierSummary outliers;
+  std::uint64_t singular_texels = 0;  // near lights: normal matrix not positive definite
   double sum_sq = 0.0;
   double sum_abs = 0.0;
   double max_abs = 0.0;
@@ -60,7 +62,9 @@ struct StatsTotal {
   std::uint64_t count = 0;
   std::vector<std::uint64_t> hist = std::vector<std::uint64_t>(kHistBins, 0);
   OutlierSummary outliers;
+  std::uint64_t singular_texels = 0;
   void merge_outliers(const RowStats& r) {
+    singular_texels += r.singular_texels;
     outliers.samples += r.outliers.samples;
     outliers.shadows += r.outliers.shadows;
     outliers.highlights += r.outliers.highlights;
@@ -125,17 +129,32 @@ void finish_ycc_chroma(double sy, double scb, double scr, float* colour) {
   colour[1] = sy > 1e-20 ? static_cast<float>(scr / sy) : 0.0f;
 }
 
+// The near-light model of a fit (null model: distant lights, the shared-matrix path).
+struct NearFit {
+  const NearLightModel* model = nullptr;
+  bool falloff = false;
+  double ridge_lambda = 0.0;  // relative to the number of lights, as DesignOptions'
+};
+
+// One texel's light geometry under near lights: design rows, directions, sample corrections.
+struct TexelGeometry {
+  Eigen::Matrix<double, Eigen::Dynamic, kPtmTerms, Eigen::RowMajor> basis;  // N x 6
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> dirs;           // N x 3
+  std::vector<double> correction;                                           // N
+};
+
 // Fits one band. Output buffers: coeffs [texel][poly][term], colour [texel][colours].
 class BandFitter {
  public:
   BandFitter(const LightDesign& design, const FitOptions& options, int width, int height,
-             int channels, ColourSpace colour_space)
+             int channels, ColourSpace colour_space, const NearFit& near = {})
       : design_(design),
         options_(options),
         width_(width),
         channels_(channels),
         srgb_(colour_space == ColourSpace::kSRGB),
-        residual_row_step_(residual_row_step(width, height)) {
+        residual_row_step_(residual_row_step(width, height)),
+        near_(near) {
     a_f_ = design.design().cast<float>();
     const auto n = design.design().rows();
     light_.resize(n, 3);
@@ -163,7 +182,9 @@ class BandFitter {
       if (st.active) st.hist.assign(kHistBins, 0);
       float* c_out = coeffs->data() + static_cast<std::size_t>(r) * width_ * polys * kPtmTerms;
       float* col_out = colour->data() + static_cast<std::size_t>(r) * width_ * ncol;
-      if (robust_) {
+      if (near_.model != nullptr) {
+        fit_row_near(band, r, c_out, col_out, &st);
+      } else if (robust_) {
         fit_row_texels(band, r, c_out, col_out, &st);
       } else {
         fit_row(band, r, c_out, col_out, &st);
@@ -333,12 +354,20 @@ class BandFitter {
     }
   }
 
-  // The fitted model's RGB for light i of a texel (grey input: rgb[0] is the grey value).
-  void model_rgb(const float* coef, const float* col, int i, double rgb[3]) const {
+  // The fitted model's RGB for light i of a texel (grey input: rgb[0] is the grey value);
+  // `g`: the texel's own geometry under near lights (null: the shared design).
+  void model_rgb(const float* coef, const float* col, int i, double rgb[3],
+                 const TexelGeometry* g = nullptr) const {
     const auto b = design_.design().row(i);
+    const double* gb =
+        g != nullptr ? g->basis.data() + static_cast<std::ptrdiff_t>(i) * kPtmTerms : nullptr;
     auto eval = [&](const float* c) {
       double v = 0.0;
-      for (int t = 0; t < kPtmTerms; ++t) v += b(t) * c[t];
+      if (gb != nullptr) {
+        for (int t = 0; t < kPtmTerms; ++t) v += gb[t] * c[t];
+      } else {
+        for (int t = 0; t < kPtmTerms; ++t) v += b(t) * c[t];
+      }
       return v;
     };
     switch (options_.model) {
@@ -359,8 +388,8 @@ class BandFitter {
   // Residual map, counts, labels, normals and albedo of one texel from its samples, weights
   // (0 = rejected) and labels, and its fitted coefficients.
   void texel_extras(const std::vector<double>& s, const double* value, const double* weights,
-                    const SampleLabel* labels, const float* coef, const float* col, int x,
-                    int y) const {
+                    const SampleLabel* labels, const float* coef, const float* col, int x, int y,
+                    const TexelGeometry* geo = nullptr) const {
     FitOutputs& o = *options_.outputs;
     const int n = design_.lights();
     const int ch = channels_;
@@ -370,7 +399,7 @@ class BandFitter {
       for (int i = 0; i < n; ++i) {
         if (labels[i] != SampleLabel::kInlier) continue;
         double rgb[3];
-        model_rgb(coef, col, i, rgb);
+        model_rgb(coef, col, i, rgb, geo);
         for (int k = 0; k < ch; ++k) {
           const double d = 255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]);
           sum += d * d;
@@ -401,7 +430,8 @@ class BandFitter {
       for (int i = 0; i < n; ++i) {
         const double w = weights[i];
         if (w <= 0.0) continue;
-        const Eigen::Vector3d l = light_.row(i).transpose();
+        const Eigen::Vector3d l = geo != nullptr ? Eigen::Vector3d(geo->dirs.row(i).transpose())
+                                                 : Eigen::Vector3d(light_.row(i).transpose());
         m.noalias() += w * l * l.transpose();
         rhs += (w * (srgb_ ? srgb_to_linear(value[i]) : value[i])) * l;
       }
@@ -416,7 +446,8 @@ class BandFitter {
       for (int i = 0; i < n; ++i) {
         const double w = weights[i];
         if (w <= 0.0) continue;
-        const double shade = std::max(0.0, light_.row(i).dot(nrm));
+        const double shade =
+            std::max(0.0, geo != nullptr ? geo->dirs.row(i).dot(nrm) : light_.row(i).dot(nrm));
         den += w * shade * shade;
         for (int k = 0; k < 3; ++k) {
           const double v = s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
@@ -533,6 +564,117 @@ class BandFitter {
     }
   }
 
+  // Near lights: every texel its own design rows A_t (from its light directions) and its own
+  // 6 x 6 normal equations A_t^T A_t c = A_t^T s, by Cholesky in double; samples first
+  // multiplied by the fall-off correction when asked.
+  void fit_row_near(const StackBand& band, int r, float* c_out, float* col_out,
+                    RowStats* st) const {
+    const int n = band.images;
+    const int ch = channels_;
+    const int polys = polynomial_count(options_.model);
+    const int ncol = colour_count(options_.model);
+    const auto un = static_cast<std::size_t>(n);
+    const int y = band.y0 + r;
+    TexelGeometry g;
+    g.basis.resize(n, kPtmTerms);
+    g.dirs.resize(n, 3);
+    g.correction.resize(un);
+    std::vector<double> s, value(un), weights(un, 1.0);
+    const std::vector<SampleLabel> labels(un, SampleLabel::kInlier);
+    const double ridge = near_.ridge_lambda * static_cast<double>(n);
+    for (int x = 0; x < width_; ++x) {
+      near_.model->texel(x, y, g.dirs.data(), g.correction.data());
+      for (int i = 0; i < n; ++i) {
+        const auto b = ptm_basis(g.dirs(i, 0), g.dirs(i, 1));
+        for (int t = 0; t < kPtmTerms; ++t) g.basis(i, t) = b[static_cast<std::size_t>(t)];
+      }
+      gather(band, r, x, &s);
+      if (near_.falloff) {
+        for (int i = 0; i < n; ++i) {
+          const double f = g.correction[static_cast<std::size_t>(i)];
+          for (int k = 0; k < ch; ++k) {
+            double& v = s[static_cast<std::size_t>(i * ch + k)];
+            v = srgb_ ? linear_to_srgb(srgb_to_linear(v) * f) : v * f;
+          }
+        }
+      }
+      const bool rgb_model = options_.model == ColourModel::kRGB;
+      if (!rgb_model || extras_) labelling_values(s, n, value.data(), nullptr);
+      // Normal matrix and right-hand sides by hand, fixed sizes: Eigen's general products
+      // allocate and cost several times more at these shapes (6 x N times N x 6).
+      const int nrhs = rgb_model ? ch : 1;
+      double mm[kPtmTerms][kPtmTerms] = {};
+      double rr[kPtmTerms][3] = {};
+      for (int i = 0; i < n; ++i) {
+        const double* b = g.basis.data() + static_cast<std::ptrdiff_t>(i) * kPtmTerms;
+        const double* v =
+            rgb_model ? s.data() + static_cast<std::size_t>(i) * ch : value.data() + i;
+        for (int a = 0; a < kPtmTerms; ++a) {
+          for (int c = 0; c <= a; ++c) mm[a][c] += b[a] * b[c];
+          for (int k = 0; k < nrhs; ++k) rr[a][k] += b[a] * v[k];
+        }
+      }
+      Eigen::Matrix<double, kPtmTerms, kPtmTerms> m;
+      Eigen::Matrix<double, kPtmTerms, 3> rhs = Eigen::Matrix<double, kPtmTerms, 3>::Zero();
+      for (int a = 0; a < kPtmTerms; ++a) {
+        for (int c = 0; c <= a; ++c) m(a, c) = m(c, a) = mm[a][c];
+        for (int k = 0; k < nrhs; ++k) rhs(a, k) = rr[a][k];
+      }
+      if (ridge > 0.0) m.diagonal().array() += ridge;
+      const Eigen::LLT<Eigen::Matrix<double, kPtmTerms, kPtmTerms>> llt(m);
+      if (llt.info() != Eigen::Success) {
+        ++st->singular_texels;  // coefficients stay 0
+        continue;
+      }
+      const Eigen::Matrix<double, kPtmTerms, 3> c = llt.solve(rhs);
+      float* coef = c_out + static_cast<std::size_t>(x) * polys * kPtmTerms;
+      float* col = col_out + static_cast<std::size_t>(x) * ncol;
+      auto store = [&](int from, float* dst) {
+        for (int t = 0; t < kPtmTerms; ++t) dst[t] = static_cast<float>(c(t, from));
+      };
+      if (rgb_model) {
+        for (int k = 0; k < 3; ++k) store(ch == 3 ? k : 0, coef + k * kPtmTerms);
+      } else {
+        store(0, coef);
+        if (options_.model == ColourModel::kLRGB) {
+          double yy = 0.0;
+          double yc[3] = {0.0, 0.0, 0.0};
+          for (int i = 0; i < n; ++i) {
+            const double yi = value[static_cast<std::size_t>(i)];
+            yy += yi * yi;
+            for (int k = 0; k < 3; ++k)
+              yc[k] += yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+          }
+          finish_lrgb_colour(yy, yc, col, coef);
+        } else {
+          double sy = 0.0, scb = 0.0, scr = 0.0;
+          if (ch == 3) {
+            for (int i = 0; i < n; ++i) {
+              const double* p = s.data() + static_cast<std::size_t>(i) * 3;
+              const auto ycc = to_ycbcr(p[0], p[1], p[2]);
+              const double wgt = std::max(0.0, ycc.y);
+              sy += wgt;
+              scb += wgt * ycc.cb;
+              scr += wgt * ycc.cr;
+            }
+          }
+          finish_ycc_chroma(sy, scb, scr, col);
+        }
+      }
+      if (st->active) {
+        for (int i = 0; i < n; ++i) {
+          double rgb[3];
+          model_rgb(coef, col, i, rgb, &g);
+          for (int k = 0; k < ch; ++k)
+            st->add(255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]));
+        }
+      }
+      if (extras_) {
+        texel_extras(s, value.data(), weights.data(), labels.data(), coef, col, x, y, &g);
+      }
+    }
+  }
+
   const LightDesign& design_;
   const FitOptions& options_;
   int width_;
@@ -545,13 +687,14 @@ class BandFitter {
   Eigen::MatrixX3d light_;  // unit light directions (for normals)
   bool robust_ = false;
   bool extras_ = false;
+  NearFit near_;
 };
 
 using BandSource = std::function<bool(int rows, StackBand* band)>;
 
 FitReport run_fit(const LightDesign& design, const FitOptions& options, int width, int height,
                   int channels, ColourSpace colour_space, const BandSource& next_band,
-                  CoefficientSink& sink) {
+                  CoefficientSink& sink, const NearFit& near = {}) {
   const auto t0 = Clock::now();
   FitReport report;
   report.lights = design.lights();
@@ -574,7 +717,7 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
   }
   report.threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
 
-  BandFitter fitter(design, options, width, height, channels, colour_space);
+  BandFitter fitter(design, options, width, height, channels, colour_space, near);
   StatsTotal totals;
   StackBand bands[2];
   std::vector<float> coeffs, colour;
@@ -621,6 +764,7 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
   report.residuals = totals.finish();
   report.residuals.row_step = residual_row_step(width, height);
   report.outliers = totals.outliers;
+  report.light_model.singular_texels = totals.singular_texels;
   report.total_seconds = seconds_since(t0);
   return report;
 }
@@ -641,44 +785,61 @@ void finish_sink(CoefficientSink& sink, FitReport* report) {
   report->total_seconds += seconds_since(t);
 }
 
-}  // namespace
-
-std::string FitOptions::validate() const {
-  if (band_rows < 1) return "band_rows must be at least 1";
-  if (threads < 0) return "threads must be >= 0 (0 = all cores)";
-  if (!(design.max_condition > 1.0)) return "max_condition must be > 1";
-  if (!(design.ridge_lambda >= 0.0) || !std::isfinite(design.ridge_lambda)) {
-    return "ridge lambda must be a finite number >= 0";
+// The light model of a fit: near (per-texel directions) when a sample plane is given, else
+// distant. Checks what can be checked before any image is read.
+struct LightModelSetup {
+  std::optional<NearLightModel> model;
+  NearLightReport report;
+  NearFit fit(const FitOptions& options) const {
+    NearFit f;
+    if (!model) return f;
+    f.model = &*model;
+    f.falloff = options.near.falloff;
+    f.ridge_lambda = design_options_for(options).ridge_lambda;
+    return f;
   }
-  if (const auto err = robust.validate(); !err.empty()) return err;
-  return {};
-}
-
-FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink) {
-  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
-  const ThreadLimit limit(options.threads);
-  // Check the layout before opening a single image: a bad layout fails fast.
-  const LightDesign design = LightDesign::build(lights.directions(), design_options_for(options));
-  FitReport report;
-  {
-    StackReader reader(lights.images());
-    FitOptions run_options = options;
-    if (reader.info().format == PixelFormat::kF32) {
-      // Float files are not clipped at full scale (HDR): no sample is "saturated".
-      run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
+  // The images' size must be the plane's.
+  void check_size(int width, int height) const {
+    if (!model) return;
+    const SamplePlane& p = model->plane();
+    if (p.width_px != width || p.height_px != height) {
+      throw Error("fit: the sample plane is for " + std::to_string(p.width_px) + "x" +
+                  std::to_string(p.height_px) + " images but the capture is " +
+                  std::to_string(width) + "x" + std::to_string(height));
     }
-    const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
-    report = run_fit(design, run_options, reader.width(), reader.height(), reader.channels(),
-                     reader.info().colour_space, source, sink);
-  }  // images closed before the sink finishes
-  finish_sink(sink, &report);
-  return report;
+  }
+  void finish(FitReport* out) const {
+    NearLightReport r = report;
+    r.singular_texels = out->light_model.singular_texels;
+    out->light_model = r;
+  }
+};
+
+LightModelSetup light_model_setup(const LightSet& lights, const FitOptions& options) {
+  LightModelSetup setup;
+  if (!options.near.plane) {
+    const bool positions = std::any_of(lights.lights.begin(), lights.lights.end(),
+                                       [](const Light& l) { return l.position_mm.has_value(); });
+    if (positions) setup.report.note = "light positions ignored: no sample plane given";
+    return setup;
+  }
+  if (options.solver != Solver::kLS && options.solver != Solver::kRidge) {
+    throw Error(
+        "fit: near lights (a sample plane was given) are supported by the ls and ridge "
+        "solvers only, not '" +
+        std::string(to_string(options.solver)) +
+        "' (its per-texel labelling uses the shared distant-light design); fit near "
+        "lights with --solver ls or ridge, or drop the plane for the distant model");
+  }
+  setup.model = NearLightModel::from_lights(lights, *options.near.plane);
+  setup.report = setup.model->field_report();
+  setup.report.falloff_corrected = options.near.falloff;
+  return setup;
 }
 
-FitReport fit_images(const std::vector<Image>& images,
-                     const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
-                     CoefficientSink& sink) {
-  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+FitReport fit_in_memory(const std::vector<Image>& images,
+                        const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
+                        CoefficientSink& sink, const LightModelSetup& setup) {
   if (images.size() != light_dirs.size()) {
     throw Error("fit: " + std::to_string(images.size()) + " images but " +
                 std::to_string(light_dirs.size()) + " light directions");
@@ -695,6 +856,7 @@ FitReport fit_images(const std::vector<Image>& images,
       throw Error("fit: image " + std::to_string(i) + " differs in size or channels from image 0");
     }
   }
+  setup.check_size(w, h);
   int next_row = 0;
   const auto source = [&](int rows, StackBand* band) {
     if (next_row >= h) return false;
@@ -721,9 +883,69 @@ FitReport fit_images(const std::vector<Image>& images,
     next_row += band->rows;
     return true;
   };
-  FitReport report = run_fit(design, options, w, h, ch, images[0].colour_space(), source, sink);
+  FitReport report = run_fit(design, options, w, h, ch, images[0].colour_space(), source, sink,
+                             setup.fit(options));
+  setup.finish(&report);
   finish_sink(sink, &report);
   return report;
+}
+
+}  // namespace
+
+std::string FitOptions::validate() const {
+  if (band_rows < 1) return "band_rows must be at least 1";
+  if (threads < 0) return "threads must be >= 0 (0 = all cores)";
+  if (!(design.max_condition > 1.0)) return "max_condition must be > 1";
+  if (!(design.ridge_lambda >= 0.0) || !std::isfinite(design.ridge_lambda)) {
+    return "ridge lambda must be a finite number >= 0";
+  }
+  if (const auto err = robust.validate(); !err.empty()) return err;
+  if (const auto err = near.validate(); !err.empty()) return err;
+  return {};
+}
+
+FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+  const ThreadLimit limit(options.threads);
+  // Check the layout before opening a single image: a bad layout fails fast.
+  const LightDesign design = LightDesign::build(lights.directions(), design_options_for(options));
+  const LightModelSetup setup = light_model_setup(lights, options);
+  FitReport report;
+  {
+    StackReader reader(lights.images());
+    setup.check_size(reader.width(), reader.height());
+    FitOptions run_options = options;
+    if (reader.info().format == PixelFormat::kF32) {
+      // Float files are not clipped at full scale (HDR): no sample is "saturated".
+      run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
+    }
+    const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
+    report = run_fit(design, run_options, reader.width(), reader.height(), reader.channels(),
+                     reader.info().colour_space, source, sink, setup.fit(run_options));
+    setup.finish(&report);
+  }  // images closed before the sink finishes
+  finish_sink(sink, &report);
+  return report;
+}
+
+FitReport fit_images(const std::vector<Image>& images,
+                     const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
+                     CoefficientSink& sink) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+  LightSet lights;
+  for (const auto& d : light_dirs) {
+    Light l;
+    l.direction = d;
+    lights.lights.push_back(l);
+  }
+  return fit_in_memory(images, light_dirs, options, sink, light_model_setup(lights, options));
+}
+
+FitReport fit_images(const std::vector<Image>& images, const LightSet& lights,
+                     const FitOptions& options, CoefficientSink& sink) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("fit options: " + err);
+  return fit_in_memory(images, lights.directions(), options, sink,
+                       light_model_setup(lights, options));
 }
 
 std::string FitReport::to_json() const {
@@ -754,6 +976,18 @@ std::string FitReport::to_json() const {
                    {"highlight", outliers.highlights},
                    {"fallback_texels", outliers.fallback_texels},
                    {"ceres_texels", outliers.ceres_texels}};
+  {
+    nlohmann::json lm = {{"model", light_model.model}};
+    if (light_model.model == "near") {
+      lm["max_spread_deg"] = light_model.max_spread_deg;
+      lm["mean_spread_deg"] = light_model.mean_spread_deg;
+      lm["falloff_range"] = {light_model.min_falloff, light_model.max_falloff};
+      lm["falloff_corrected"] = light_model.falloff_corrected;
+      lm["singular_texels"] = light_model.singular_texels;
+    }
+    if (!light_model.note.empty()) lm["note"] = light_model.note;
+    j["light_model"] = lm;
+  }
   j["threads"] = threads;
   j["timings_s"] = {{"decode", decode_seconds},
                     {"fit", fit_seconds},

@@ -119,6 +119,7 @@ std::string RobustOptions::validate() const {
   if (!(saturation_level > 0.0)) return "saturation_level must be > 0 (+inf disables it)";
   if (max_iterations < 1 || ceres_max_iterations < 1) return "iterations must be >= 1";
   if (min_inliers < kPtmTerms) return "min_inliers must be at least 6";
+  if (!(readmit_k >= 0.0)) return "readmit_k must be >= 0 (0 = off)";
   return {};
 }
 
@@ -310,12 +311,38 @@ struct TexelSolver::Impl {
         if (!weighted(value, weights, c)) *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
         out.fallback = true;
       }
+      if (opt.readmit_k > 0.0 && !out.fallback) readmit(value, saturated, weights, labels, c);
     }
     for (int i = 0; i < n; ++i) {
       out.shadows += labels[i] == SampleLabel::kShadow ? 1 : 0;
       out.highlights += labels[i] == SampleLabel::kHighlight ? 1 : 0;
     }
     return out;
+  }
+
+  // Re-admits rejected, unclipped samples within readmit_k scales of the polynomial fitted on
+  // the inliers, and refits once (RobustOptions::readmit_k). Keeps everything on failure.
+  void readmit(const double* value, const std::uint8_t* saturated, double* weights,
+               SampleLabel* labels, Vec6* c) {
+    residuals(value, *c);
+    const double s = scale(labels);
+    std::copy(labels, labels + n, trial.begin());
+    bool changed = false;
+    for (int i = 0; i < n; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      if (labels[i] == SampleLabel::kInlier || saturated[i] != 0) continue;
+      if (std::abs(resid[ui]) <= opt.readmit_k * s) {
+        trial[ui] = SampleLabel::kInlier;
+        changed = true;
+      }
+    }
+    if (!changed) return;
+    to_weights(trial.data(), n, trial_weights.data());
+    Vec6 next;
+    if (!weighted(value, trial_weights.data(), &next)) return;
+    std::copy(trial.begin(), trial.end(), labels);
+    std::copy(trial_weights.begin(), trial_weights.end(), weights);
+    *c = next;
   }
 
   // Residuals against value ~ max(0, l . g) + a, fitted on the inliers.

@@ -15,6 +15,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/plane.h"
 #include "ptmkit/synth/synth.h"
 #include "render.h"
 
@@ -179,6 +180,9 @@ void validate(const SynthOptions& o) {
     require(d.z() > 0.0, "light " + std::to_string(i + 1) + " is below the horizon (z <= 0)");
   }
   require(!o.light_dirs.empty() || !o.lights.empty(), "no lights");
+  require(finite(o.mm_per_px) && o.mm_per_px > 0.0, "mm per pixel must be finite and > 0");
+  require(finite(o.dome_radius_mm) && o.dome_radius_mm >= 0.0,
+          "dome radius must be finite and >= 0 mm (0 = distant lights)");
 }
 
 std::vector<Eigen::Vector3d> resolve_lights(const SynthOptions& o) {
@@ -218,6 +222,22 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
   const Scene scene = build_scene(o);
   const bool relief = scene.kind == SceneKind::kRelief;
   const int n = static_cast<int>(dirs.size());
+  const bool near = o.dome_radius_mm > 0.0;
+  if (near) {
+    // A light at or below the relief's top would light some texels from below the horizon.
+    const double top_mm = scene.max_height_px * o.mm_per_px;
+    for (int i = 0; i < n; ++i) {
+      const double z = o.dome_radius_mm * dirs[static_cast<std::size_t>(i)].z();
+      if (!(z > top_mm)) {
+        char msg[200];
+        std::snprintf(msg, sizeof(msg),
+                      "light %d is %.3g mm above the plane at dome radius %.3g mm, not above "
+                      "the relief's top (%.3g mm): raise the radius or lower the relief",
+                      i + 1, z, o.dome_radius_mm, top_mm);
+        throw Error(std::string("synth: ") + msg);
+      }
+    }
+  }
   const ImageWriteOptions image_opts{pixel_format(o.sensor.bits), o.sensor.jpeg_quality};
   ImageWriteOptions u16;
   u16.format = PixelFormat::kU16;
@@ -278,7 +298,7 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
     std::vector<fs::path>& files = light_files[static_cast<std::size_t>(i)];
     const std::string name = image_name(i, n, o.sensor.file_type);
     std::vector<std::uint8_t> shadow;
-    if (relief && o.cast_shadows) shadow = cast_shadow_mask(scene, dirs[i]);
+    if (relief && o.cast_shadows) shadow = cast_shadow_mask(scene, o, dirs[i]);
     const std::uint8_t* shadow_ptr = shadow.empty() ? nullptr : shadow.data();
     Image image;
     std::vector<std::uint8_t> labels;
@@ -323,16 +343,43 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
       entry["diffuse"] = "truth/diffuse/" + name;
       entry["labels"] = "truth/labels/" + label_name(name);
     }
-    images.push_back(entry);
     Light light;
     light.image = out_dir / name;
     light.direction = dirs[i];
+    if (near) {
+      const Eigen::Vector3d p = o.dome_radius_mm * dirs[i];
+      light.position_mm = p;
+      entry["position_mm"] = {p.x(), p.y(), p.z()};
+    }
+    images.push_back(entry);
     light_set.lights.push_back(light);
   }
   report.lp_file = out_dir / "lights.lp";
   write_lp(report.lp_file, light_set);
   written(report.lp_file);
   report.images = n;
+  if (near) {
+    // The .lp holds only the nominal directions; positions go in lights.json, in the format
+    // of calib's dome JSON (read_dome_json, `ptmkit fit --lights-json`), and the plane
+    // geometry in plane.json.
+    nlohmann::json lj;
+    lj["frame"] = "light frame: x right, y toward the image top, z toward the camera; mm";
+    lj["lights"] = nlohmann::json::array();
+    for (int i = 0; i < n; ++i) {
+      const Light& l = light_set.lights[static_cast<std::size_t>(i)];
+      // Position only (the direction is normalise(position)): calib's read_dome_json takes
+      // one of the two per light.
+      lj["lights"].push_back(
+          {{"image", image_name(i, n, o.sensor.file_type)},
+           {"position_mm", {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()}},
+           {"intensity", l.intensity}});
+    }
+    write_file_atomic(out_dir / "lights.json", lj.dump(2) + "\n");
+    written(out_dir / "lights.json");
+    write_plane_json(out_dir / "plane.json",
+                     orthographic_plane(scene.width, scene.height, o.mm_per_px));
+    written(out_dir / "plane.json");
+  }
 
   if (o.write_truth) {
     nlohmann::json j;
@@ -343,6 +390,19 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
     j["width"] = o.width;
     j["height"] = o.height;
     j["camera"] = "orthographic, looking down -z (view direction +z), one pixel per texel";
+    j["mm_per_px"] = o.mm_per_px;
+    j["dome_radius_mm"] = o.dome_radius_mm;
+    if (near) {
+      j["near_lights"] = {
+          {"model",
+           "point lights at dome_radius_mm * direction (light frame, origin at the plane "
+           "centre); texel (x, y) at (X, Y, height_px * mm_per_px), (X, Y) from plane.json; lit "
+           "from normalise(position - texel)"},
+          {"inverse_square_falloff", o.inverse_square_falloff},
+          {"falloff", "(|position| / |position - texel|)^2, 1 at the plane centre"},
+          {"lights_json", "lights.json"},
+          {"plane_json", "plane.json"}};
+    }
     j["frame"] = "light frame: x to the image's right, y to the image's top, z toward the camera";
     if (relief) {
       j["relief"] = {{"relief_height_frac", o.relief.relief_height_frac},

@@ -31,6 +31,7 @@ void write_coefficients_exr(const std::filesystem::path& path, const Coefficient
   spec.alpha_channel = -1;
   spec.attribute("oiio:ColorSpace", "Linear");
   spec.attribute("compression", "zip");
+  spec.attribute("DateTime", "");  // no time stamp: the file depends on the options only
   if (!out->open(out_file.temp_path().string(), spec)) {
     throw Error(where(path) + ": cannot open for writing: " + out->geterror());
   }

@@ -103,7 +103,79 @@ bool marched_shadow(const Scene& s, const BlockMax& blocks, int x, int y, double
   }
 }
 
+// Marching direction of a ray along unit light direction l: ground direction in image pixels
+// (rows grow downward, the light frame's y upward) and rise per pixel. False for an overhead
+// light (the ray never comes down: nothing casts a shadow) or one below the horizon.
+bool march_direction(const Eigen::Vector3d& l, double* ux, double* uy, double* rise) {
+  const double ground = std::hypot(l.x(), l.y());
+  if (ground < 1e-9 || l.z() <= 0.0) return false;
+  // Components below rounding noise (cos 90 degrees) are zeroed so the march never creeps
+  // along a block edge.
+  auto clean = [](double v) { return std::abs(v) < 1e-12 ? 0.0 : v; };
+  *ux = clean(l.x() / ground);
+  *uy = clean(-l.y() / ground);
+  *rise = l.z() / ground;
+  return true;
+}
+
 }  // namespace
+
+namespace detail {
+
+TexelLight::TexelLight(const Scene& scene, const SynthOptions& options,
+                       const Eigen::Vector3d& light_dir)
+    : scene_(scene), dir_(light_dir.normalized()) {
+  near_ = options.dome_radius_mm > 0.0;
+  if (!near_) return;
+  falloff_ = options.inverse_square_falloff;
+  position_mm_ = options.dome_radius_mm * dir_;
+  position_sq_ = position_mm_.squaredNorm();
+  mm_per_px_ = options.mm_per_px;
+  plane_ = orthographic_plane(scene.width, scene.height, options.mm_per_px);
+}
+
+Eigen::Vector3d TexelLight::at(int x, int y, double* falloff) const {
+  if (!near_) {
+    if (falloff != nullptr) *falloff = 1.0;
+    return dir_;
+  }
+  const Eigen::Vector2d xy = plane_.plane_mm(x, y);
+  const double z = scene_.height_px.empty() ? 0.0 : scene_.height_at(x, y) * mm_per_px_;
+  const Eigen::Vector3d v = position_mm_ - Eigen::Vector3d(xy.x(), xy.y(), z);
+  const double d_sq = v.squaredNorm();
+  if (falloff != nullptr) *falloff = falloff_ ? position_sq_ / d_sq : 1.0;
+  return v / std::sqrt(d_sq);
+}
+
+}  // namespace detail
+
+Eigen::Vector3d texel_light_dir(const Scene& scene, const SynthOptions& options,
+                                const Eigen::Vector3d& light_dir, int x, int y, double* falloff) {
+  return detail::TexelLight(scene, options, light_dir).at(x, y, falloff);
+}
+
+std::vector<std::uint8_t> cast_shadow_mask(const Scene& scene, const SynthOptions& options,
+                                           const Eigen::Vector3d& light_dir) {
+  if (!(options.dome_radius_mm > 0.0)) return cast_shadow_mask(scene, light_dir);
+  std::vector<std::uint8_t> mask(static_cast<std::size_t>(scene.width) * scene.height, 0);
+  if (scene.kind != SceneKind::kRelief || scene.height_px.empty()) return mask;
+  const detail::TexelLight light(scene, options, light_dir);
+  const BlockMax blocks(scene);
+  // The ray from a texel toward a point light is a straight line: marching along the
+  // texel's own direction is exact.
+  tbb::parallel_for(tbb::blocked_range<int>(0, scene.height),
+                    [&](const tbb::blocked_range<int>& r) {
+                      for (int y = r.begin(); y < r.end(); ++y) {
+                        std::uint8_t* row = mask.data() + static_cast<std::size_t>(y) * scene.width;
+                        for (int x = 0; x < scene.width; ++x) {
+                          double ux = 0.0, uy = 0.0, rise = 0.0;
+                          if (!march_direction(light.at(x, y, nullptr), &ux, &uy, &rise)) continue;
+                          row[x] = marched_shadow(scene, blocks, x, y, ux, uy, rise) ? 1 : 0;
+                        }
+                      }
+                    });
+  return mask;
+}
 
 std::vector<std::uint8_t> cast_shadow_mask(const Scene& scene, const Eigen::Vector3d& light_dir) {
   std::vector<std::uint8_t> mask(static_cast<std::size_t>(scene.width) * scene.height, 0);
@@ -173,8 +245,10 @@ void render_into(const Scene& s, const SynthOptions& o, const Eigen::Vector3d& l
   if (labels != nullptr) labels->assign(static_cast<std::size_t>(w) * h, kLabelInlier);
 
   const Sensor sensor(o);
-  const Eigen::Vector3d l = light_dir.normalized();
-  const Eigen::Vector3d half = (l + Eigen::Vector3d(0.0, 0.0, 1.0)).normalized();
+  const TexelLight light(s, o, light_dir);
+  const bool near = light.near();
+  const Eigen::Vector3d l0 = light.nominal();
+  const Eigen::Vector3d half0 = (l0 + Eigen::Vector3d(0.0, 0.0, 1.0)).normalized();
   const double ks = o.material.ks * (o.material.normalise_specular
                                          ? (o.material.exponent + 8.0) / (8.0 * std::numbers::pi)
                                          : 1.0);
@@ -196,8 +270,16 @@ void render_into(const Scene& s, const SynthOptions& o, const Eigen::Vector3d& l
         double seen[3];   // observed radiance before the specular term
         double spec = 0.0;
         bool shadowed = false;
+        // Near lights: this texel's own direction and fall-off (distant: the nominal ones).
+        double falloff = 1.0;
+        const Eigen::Vector3d l = near ? light.at(x, y, &falloff) : l0;
+        const Eigen::Vector3d half =
+            near ? (l + Eigen::Vector3d(0.0, 0.0, 1.0)).normalized() : half0;
         if (poly) {
           evaluate_polynomial(s, x, y, l.x(), l.y(), truth);
+          if (near) {
+            for (double& v : truth) v *= falloff;
+          }
           for (int c = 0; c < 3; ++c) seen[c] = truth[c];
         } else {
           const double nx = s.normals.at(x, y, 0);
@@ -206,11 +288,16 @@ void render_into(const Scene& s, const SynthOptions& o, const Eigen::Vector3d& l
           const double ndotl = nx * l.x() + ny * l.y() + nz * l.z();
           const bool cast = shadow != nullptr && shadow[texel] != 0;
           shadowed = ndotl <= 0.0 || cast;
-          const double lambert = std::max(ndotl, 0.0);
-          const double lit = shadowed ? 0.0 : ndotl;
+          double lambert = std::max(ndotl, 0.0);
+          double lit = shadowed ? 0.0 : ndotl;
           if (!shadowed && ks > 0.0) {
             const double ndoth = nx * half.x() + ny * half.y() + nz * half.z();
             if (ndoth > ndoth_cutoff) spec = ks * std::pow(ndoth, exponent);
+          }
+          if (near) {  // the light's radiance falls off; the ambient term does not
+            lambert *= falloff;
+            lit *= falloff;
+            spec *= falloff;
           }
           for (int c = 0; c < 3; ++c) {
             const double a = s.albedo.at(x, y, c);
@@ -255,7 +342,7 @@ RenderedLight render_light(const Scene& scene, const SynthOptions& options,
   RenderedLight out;
   std::vector<std::uint8_t> shadow;
   if (options.cast_shadows && scene.kind == SceneKind::kRelief) {
-    shadow = cast_shadow_mask(scene, light_dir);
+    shadow = cast_shadow_mask(scene, options, light_dir);
   }
   detail::render_into(scene, options, light_dir, image_index,
                       shadow.empty() ? nullptr : shadow.data(), &out.observed, &out.diffuse,

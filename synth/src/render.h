@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "ptmkit/core/plane.h"
 #include "ptmkit/synth/synth.h"
 
 namespace ptmkit::synth::detail {
@@ -29,6 +30,29 @@ class Sensor {
   double sigma_;      // noise standard deviation, normalised units
   double highlight_;  // highlight threshold, normalised units
   std::uint64_t seed_;
+};
+
+// One light as each texel sees it: the nominal direction everywhere (distant), or the
+// direction toward the light's position and its inverse-square fall-off (near lights, see
+// SynthOptions::dome_radius_mm).
+class TexelLight {
+ public:
+  TexelLight(const Scene& scene, const SynthOptions& options, const Eigen::Vector3d& light_dir);
+  [[nodiscard]] bool near() const { return near_; }
+  [[nodiscard]] const Eigen::Vector3d& nominal() const { return dir_; }
+  // Unit direction toward the light from texel (x, y); *falloff (if non-null) its relative
+  // intensity (1 for distant lights or with fall-off off).
+  [[nodiscard]] Eigen::Vector3d at(int x, int y, double* falloff) const;
+
+ private:
+  const Scene& scene_;
+  Eigen::Vector3d dir_;
+  bool near_ = false;
+  bool falloff_ = false;
+  Eigen::Vector3d position_mm_ = Eigen::Vector3d::Zero();
+  double position_sq_ = 0.0;
+  double mm_per_px_ = 1.0;
+  SamplePlane plane_;
 };
 
 // Renders one light into whichever of observed / diffuse / labels are non-null (images are

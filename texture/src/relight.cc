@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -112,8 +113,12 @@ std::string RelightSetReport::to_json() const {
   return j.dump(2) + "\n";
 }
 
-RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& lights,
-                                   const RelightSetOptions& options) {
+namespace {
+
+// The light-set loop for any texture: `render` relights it at a unit direction.
+RelightSetReport relight_set_impl(int map_width, int map_height, ColourSpace map_colour_space,
+                                  const std::function<Image(const Eigen::Vector3d&)>& render,
+                                  const LightSet& lights, const RelightSetOptions& options) {
   const fs::path set_name = lights.source.empty() ? fs::path("light set") : lights.source;
   if (options.out_dir.empty()) throw Error("relight: no output folder given");
   if (lights.empty()) throw Error(where(set_name) + ": no lights");
@@ -138,18 +143,18 @@ RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& li
     std::error_code ec;
     if (!fs::exists(light.image, ec)) continue;
     const ImageInfo info = probe_image(light.image);
-    if (info.width != map.width || info.height != map.height) {
+    if (info.width != map_width || info.height != map_height) {
       throw Error(where(light.image) + ": photo is " + std::to_string(info.width) + " x " +
-                  std::to_string(info.height) + ", the texture is " + std::to_string(map.width) +
-                  " x " + std::to_string(map.height));
+                  std::to_string(info.height) + ", the texture is " + std::to_string(map_width) +
+                  " x " + std::to_string(map_height));
     }
     if (info.channels != 1 && info.channels != 3 && info.channels != 4) {
       throw Error(where(light.image) + ": photo has " + std::to_string(info.channels) +
                   " channels; 1, 3 or 4 can be compared");
     }
-    if (info.colour_space != map.colour_space) {
+    if (info.colour_space != map_colour_space) {
       throw Error(where(light.image) + ": photo is " + std::string(to_string(info.colour_space)) +
-                  ", the texture is taken as " + std::string(to_string(map.colour_space)) +
+                  ", the texture is taken as " + std::string(to_string(map_colour_space)) +
                   "; say which colour space the texture holds");
     }
     has_photo[i] = true;
@@ -157,10 +162,10 @@ RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& li
   Image mask;
   if (!options.mask.empty()) {
     mask = read_image(options.mask);
-    if (mask.width() != map.width || mask.height() != map.height) {
+    if (mask.width() != map_width || mask.height() != map_height) {
       throw Error(where(options.mask) + ": mask is " + std::to_string(mask.width()) + " x " +
-                  std::to_string(mask.height()) + ", the texture is " + std::to_string(map.width) +
-                  " x " + std::to_string(map.height));
+                  std::to_string(mask.height()) + ", the texture is " + std::to_string(map_width) +
+                  " x " + std::to_string(map_height));
     }
   }
 
@@ -181,7 +186,7 @@ RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& li
     e.output = options.out_dir / light.image.filename();
     e.reference = light.image;
     e.light_dir = normalised_light(light.direction);
-    const Image relit = relight(map, e.light_dir, options.relight);
+    const Image relit = render(e.light_dir);
     const bool existed = fs::exists(e.output, ec);
     write_image(e.output, relit.view(), options.write);
     if (!existed) cleanup.wrote(e.output);
@@ -212,6 +217,47 @@ RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& li
   }
   cleanup.done();
   return report;
+}
+
+}  // namespace
+
+RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& lights,
+                                   const RelightSetOptions& options) {
+  return relight_set_impl(
+      map.width, map.height, map.colour_space,
+      [&](const Eigen::Vector3d& l) { return relight(map, l, options.relight); }, lights, options);
+}
+
+RelightSetReport relight_light_set(const RtiMap& map, const LightSet& lights,
+                                   const RelightSetOptions& options) {
+  return relight_set_impl(
+      map.width, map.height, map.colour_space,
+      [&](const Eigen::Vector3d& l) { return relight(map, l, options.relight); }, lights, options);
+}
+
+Image relight(const RtiMap& map, const Eigen::Vector3d& light_dir, const RelightOptions& options) {
+  const Eigen::Vector3d l = normalised_light(light_dir);
+  Image out(map.width, map.height, 3, map.colour_space, 0.0f);
+  if (l.z() <= 0.0 || out.empty()) return out;  // no light from behind the surface
+  const int t = map.terms;
+  double b[16];
+  hsh_basis(t, l, b);
+  tbb::parallel_for(tbb::blocked_range<int>(0, map.height), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      float* row = out.row(y);
+      for (int x = 0; x < map.width; ++x) {
+        const float* c = map.texel(x, y);
+        float* rgb = row + 3 * static_cast<std::size_t>(x);
+        for (int k = 0; k < 3; ++k) {
+          double v = 0.0;
+          for (int j = 0; j < t; ++j) v += c[k * t + j] * b[j];
+          rgb[k] =
+              options.clamp ? static_cast<float>(std::clamp(v, 0.0, 1.0)) : static_cast<float>(v);
+        }
+      }
+    }
+  });
+  return out;
 }
 
 }  // namespace ptmkit::texture

@@ -45,6 +45,11 @@ struct Circle {
 // nothing circular is found (the message suggests --sphere or --mask).
 [[nodiscard]] Circle find_sphere(const std::vector<Image>& images);
 
+// The same for a rig of `count` spheres: the `count` strongest circles that do not overlap,
+// each refined as above, ordered left to right (then top to bottom). Throws ptmkit::Error
+// when fewer are found (the message suggests --sphere, once per sphere).
+[[nodiscard]] std::vector<Circle> find_spheres(const std::vector<Image>& images, int count);
+
 struct SphereCamera {
   // Focal length in pixels; 0 = orthographic camera.
   double focal_px = 0.0;
@@ -77,6 +82,20 @@ struct SphereLight {
   int blob_pixels = 0;
   bool saturated = false;
   Eigen::Vector3d direction{0.0, 0.0, 1.0};  // light frame, unit
+  // Shape of the highlight: standard deviations (pixels) of its brightness along its major
+  // and minor axes, and the major axis' angle (degrees from image x, counter-clockwise as
+  // seen, i.e. toward the image top). From the same weights as the sub-pixel position.
+  double blob_major_px = 0.0;
+  double blob_minor_px = 0.0;
+  double blob_angle_deg = 0.0;
+  // The brightest pixel on the sphere away from the highlight (beyond its blob by at least
+  // 3 pixels and its own size), full scale 1: a second candidate of similar brightness
+  // makes the highlight ambiguous (a reflection of the scene, a second light).
+  double second_peak = 0.0;
+  // Filled by the rig refinement (sphere_refine.h); 0 / false before it.
+  double residual_px = 0.0;  // predicted minus measured highlight, pixels
+  double confidence = 0.0;   // 0..1, see sphere_refine.h
+  bool outlier = false;      // doubtful: `flag` says why; still used unless dropped
 };
 
 struct SphereReport {
@@ -92,6 +111,16 @@ struct SphereReport {
                                                 const Eigen::Vector2d& highlight_px, int width,
                                                 int height);
 
+// The sphere's centre in the camera frame (x right, y down, z forward) in units of its
+// radius, for a pinhole camera: the cone tangent to the sphere fitted to the outline's rays
+// (sampled on the circle when it has no outline), with one round of 3-sigma trimming.
+[[nodiscard]] Eigen::Vector3d sphere_centre_in_camera(const Circle& sphere,
+                                                      const SphereCamera& camera, int width,
+                                                      int height);
+
+// The principal point: the camera's, or the image centre.
+[[nodiscard]] Eigen::Vector2d principal_point(const SphereCamera& camera, int width, int height);
+
 // Calibrates from in-memory images (same size), one light each.
 [[nodiscard]] SphereReport calibrate_sphere(const std::vector<Image>& images,
                                             const std::vector<std::filesystem::path>& names,
@@ -105,7 +134,8 @@ struct SphereReport {
 void drop_lights(const std::vector<int>& indices, SphereReport* report);
 
 // What was detected, to be looked at: the image with the sphere's circle and centre and the
-// highlight (green: used, red: flagged, with the reason), RGB, full scale 1.
+// highlight (green: used, orange: used but an outlier, red: flagged, with the reason), RGB,
+// full scale 1.
 [[nodiscard]] Image sphere_overlay(const Image& image, const SphereReport& report,
                                    std::size_t light_index);
 

@@ -1,10 +1,15 @@
-// Fitting a capture: photographs under known distant lights in, a coefficient map out.
+// Fitting a capture: photographs under known lights in, a coefficient map out.
 //
 // The stack is read in bands of rows (all images at once, decoded in parallel) and each band
 // is fitted while the next one decodes, so memory stays at two bands plus what the sink keeps,
 // never the whole decoded stack. The least-squares solvers fit every texel with the same
 // pseudo-inverse (see design.h); the robust ones label and weight each texel's samples first
 // (see robust.h). Results are identical whatever the thread count.
+//
+// Near lights (near_light.h): given a sample plane (FitOptions::near.plane) and a position for
+// every light, each texel gets its own design rows and 6 x 6 normal equations (double), and
+// optionally a fall-off correction. Only the least-squares solvers ls and ridge support it so
+// far; others are refused. Without a plane the shared-matrix path above runs unchanged.
 #pragma once
 
 #include <cstdint>
@@ -17,6 +22,7 @@
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
 #include "ptmkit/fit/design.h"
+#include "ptmkit/fit/near_light.h"
 #include "ptmkit/fit/robust.h"
 
 namespace ptmkit::fit {
@@ -77,6 +83,10 @@ struct FitOptions {
   RobustOptions robust;
   // Optional per-texel maps (not owned; filled when non-null).
   FitOutputs* outputs = nullptr;
+  // Near lights: the sample plane and fall-off correction (near_light.h). With a plane, every
+  // light must have a position_mm, the solver must be ls or ridge, and `precision` is ignored
+  // (per-texel solves are in double).
+  NearLightOptions near;
 
   // Empty if valid, else what is wrong.
   [[nodiscard]] std::string validate() const;
@@ -115,6 +125,9 @@ struct FitReport {
   ResidualStats residuals;
   Solver solver = Solver::kLS;
   OutlierSummary outliers;
+  // The light model used: distant (shared matrix) or near (per-texel), its direction spread
+  // and fall-off range over the field.
+  NearLightReport light_model;
   int threads = 0;
   // Wall-clock seconds. Decoding and fitting overlap, so decode + fit can exceed total.
   double decode_seconds = 0.0;  // summed over bands
@@ -129,12 +142,18 @@ struct FitReport {
 
 // Fits the images of `lights` (read through core's StackReader) into `sink`. Throws
 // ptmkit::Error on a bad layout or unreadable/mismatched images (naming the file); the sink
-// has then received begin() at most, never end().
+// has then received begin() at most, never end(). With options.near.plane set, the lights'
+// position_mm give the near-light model: a light without one, a plane of another size than
+// the images, or a solver other than ls/ridge is an error.
 FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink);
 
 // The same on images already in memory (all the same size), one per direction.
 FitReport fit_images(const std::vector<Image>& images,
                      const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
                      CoefficientSink& sink);
+// The same with a light set (its directions, and its positions for the near-light model as in
+// fit_capture; the lights' image paths are not used).
+FitReport fit_images(const std::vector<Image>& images, const LightSet& lights,
+                     const FitOptions& options, CoefficientSink& sink);
 
 }  // namespace ptmkit::fit

@@ -103,6 +103,11 @@ struct RobustOptions {
   // Fewest inliers a texel keeps: below that the previous labelling stands (a polynomial on
   // too few samples extrapolates wildly to the rejected lights).
   int min_inliers = 12;
+  // sign / lambert: once the labels settle and the polynomial is fitted on the inliers, a
+  // rejected sample (not clipped) whose residual against that fit is within readmit_k robust
+  // scales is re-admitted and the polynomial refitted once: it was rejected while the fit was
+  // still pulled by outliers. 0 turns this off. Labels are the final rejected set.
+  double readmit_k = 0.0;
   // Ceres: run only on texels whose least-squares residuals show an outlier
   // (|r| > label_k * scale); other texels keep the least-squares fit. Saves most of the cost.
   bool ceres_only_where_needed = true;

@@ -1,5 +1,7 @@
 // Rendered calibration rigs with known answers: a specular sphere (mirror or black glossy)
-// in front of an orthographic or pinhole camera, lit by one small distant light.
+// in front of an orthographic or pinhole camera, lit by one small distant light; or several
+// spheres of known size (millimetres) before a pinhole camera, lit by a distant light or a
+// point light at a known position.
 //
 // Camera frame: x right, y down, z forward (into the scene), units of the sphere's radius
 // for the pinhole camera, pixels for the orthographic one. Light directions are given in the
@@ -7,12 +9,20 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
+#include <vector>
 
 #include <Eigen/Core>
 
 #include "ptmkit/core/image.h"
 
 namespace ptmkit::synth {
+
+// A sphere in the camera frame, millimetres.
+struct RigSphere {
+  Eigen::Vector3d centre_mm{0.0, 0.0, 500.0};
+  double radius_mm = 25.0;
+};
 
 struct SphereRigOptions {
   int width = 400;
@@ -25,6 +35,11 @@ struct SphereRigOptions {
   double focal_px = 0.0;
   Eigen::Vector2d principal_px{199.5, 199.5};
   Eigen::Vector3d centre_cam{0.0, 0.0, 10.0};
+  // Pinhole only: when not empty, these spheres (camera frame, mm) replace centre_cam.
+  std::vector<RigSphere> spheres;
+  // A point light at this position (camera frame, mm; pinhole only) instead of light_dir;
+  // light_radius_deg is then its angular radius as seen from the spheres.
+  std::optional<Eigen::Vector3d> light_position_mm;
   // The light: a disc of this angular radius seen in the mirror, of this brightness.
   Eigen::Vector3d light_dir{0.0, 0.0, 1.0};
   double light_radius_deg = 0.5;
@@ -35,6 +50,10 @@ struct SphereRigOptions {
   double background = 0.35;
   // Sub-samples per pixel side (anti-aliasing), and Gaussian noise in grey levels of 8 bits.
   int supersample = 4;
+  // Sub-samples per pixel side on and around the highlight (a second, finer pass; 0 or
+  // <= supersample: none). A camera integrates over each pixel exactly; a few sub-samples
+  // move a highlight of a pixel or two by hundredths of a pixel.
+  int highlight_supersample = 0;
   double noise_grey = 0.0;
   std::uint64_t seed = 1;
 };

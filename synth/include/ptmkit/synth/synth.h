@@ -1,8 +1,11 @@
 // Synthetic capture sets with known ground truth.
 //
-// A scene is rendered under a set of distant lights by an orthographic camera looking straight
-// down (view direction +z, one pixel per texel), in the light frame of light_set.h: x to the
-// image's right, y to the image's top, z toward the camera. Two scenes:
+// A scene is rendered under a set of lights by an orthographic camera looking straight down
+// (view direction +z, one pixel per texel), in the light frame of light_set.h: x to the
+// image's right, y to the image's top, z toward the camera. Lights are distant (one direction
+// for every texel, the default) or near: point lights on a dome of finite radius centred on
+// the sample-plane centre (SynthOptions::dome_radius_mm), so every texel sees each light from
+// its own direction and, optionally, with inverse-square fall-off. Two scenes:
 //
 //  - Relief: a height field (smooth bumps, a few long narrow grooves and "crumpled" fractal
 //    noise, heights in pixels) with a colour albedo texture, shaded with Lambertian diffuse,
@@ -22,7 +25,12 @@
 //                                  noise; same sensor encoding, bit depth and file type
 //   truth/labels/image_001.png     8-bit single channel, codes below (kLabel*)
 //   truth.json                     scene kind, preset, seed, size, material, sensor, lights,
-//                                  images, label codes, truth files
+//                                  images, label codes, truth files, dome radius, mm per pixel
+// Near lights only (dome_radius_mm > 0):
+//   lights.json                    every light's image, position_mm and intensity (calib's
+//                                  dome JSON, read_dome_json; `ptmkit fit --lights-json`)
+//   plane.json                     the sample plane (core/plane.h): orthographic_plane of the
+//                                  image size and mm_per_px
 // Relief only:
 //   truth/normals.exr              float xyz unit normals, light frame
 //   truth/normals.png              16-bit, (n + 1) / 2, R,G,B = x,y,z
@@ -129,6 +137,18 @@ struct SynthOptions {
   double highlight_threshold_grey = 4.0;
   // Write truth/ and truth.json (off for plain benchmark captures).
   bool write_truth = true;
+  // Scene scale: millimetres per pixel on the sample plane (0.5: a 256 px render spans 128
+  // mm). Heights scale with it (a height of h px is h * mm_per_px mm). Only near lights use it.
+  double mm_per_px = 0.5;
+  // Near lights: dome radius in millimetres; 0 (default) = distant lights. Light i sits at
+  // position_mm = dome_radius_mm * direction_i (light frame, origin at the plane centre) and
+  // texel (x, y) at p = (X, Y, height * mm_per_px), (X, Y) = orthographic_plane's plane_mm(x,
+  // y); it is lit from normalise(position - p), shading, specular, cast shadows and the truth
+  // alike. Every light must be higher than the relief's top.
+  double dome_radius_mm = 0.0;
+  // Near lights: scale each light's radiance by (|position| / |position - p|)^2, the
+  // inverse-square fall-off relative to the plane centre (1 there).
+  bool inverse_square_falloff = true;
 };
 
 // Preset names: default, matte, glossy, tall, ambient, polynomial.
@@ -187,6 +207,18 @@ void evaluate_polynomial(const Scene& scene, int x, int y, double lu, double lv,
 // lookups, stopping at the image border or once the ray is above the highest point.
 [[nodiscard]] std::vector<std::uint8_t> cast_shadow_mask(const Scene& scene,
                                                          const Eigen::Vector3d& light_dir);
+// The same for the light of `options` with nominal direction `light_dir`: with near lights
+// (options.dome_radius_mm > 0) each texel marches toward the light's position.
+[[nodiscard]] std::vector<std::uint8_t> cast_shadow_mask(const Scene& scene,
+                                                         const SynthOptions& options,
+                                                         const Eigen::Vector3d& light_dir);
+
+// The unit direction from texel (x, y) toward the light of nominal direction `light_dir`, and
+// (when `falloff` is non-null) its relative intensity there: `light_dir` itself and 1 for
+// distant lights; for near lights see SynthOptions::dome_radius_mm.
+[[nodiscard]] Eigen::Vector3d texel_light_dir(const Scene& scene, const SynthOptions& options,
+                                              const Eigen::Vector3d& light_dir, int x, int y,
+                                              double* falloff = nullptr);
 
 // One light rendered in memory: what the sensor records, and the truth.
 struct RenderedLight {
@@ -195,8 +227,9 @@ struct RenderedLight {
   std::vector<std::uint8_t> labels;  // kLabel* per texel, row-major
 };
 
-// Renders light `light_dir` (unit, z > 0) as image number `image_index` (the index seeds the
-// noise). The images' colour space is kSRGB when options.sensor.srgb, else kLinear.
+// Renders light `light_dir` (unit, z > 0; the nominal direction of a near light) as image
+// number `image_index` (the index seeds the noise). The images' colour space is kSRGB when
+// options.sensor.srgb, else kLinear.
 [[nodiscard]] RenderedLight render_light(const Scene& scene, const SynthOptions& options,
                                          const Eigen::Vector3d& light_dir, int image_index);
 

@@ -1,0 +1,250 @@
+#include "ptmkit/texture/rti.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit::texture {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+// The viewers keep theta this far from the horizon.
+constexpr double kThetaMargin = 0.04;
+constexpr long long kMaxSide = 1 << 20;
+constexpr long long kMaxTexels = 1LL << 32;
+
+static_assert(std::endian::native == std::endian::little, "the .rti floats are little-endian");
+
+}  // namespace
+
+int hsh_terms(int order) {
+  if (order < 2 || order > 4) {
+    throw Error("HSH order must be 2, 3 or 4 (4, 9 or 16 terms), got " + std::to_string(order));
+  }
+  return order * order;
+}
+
+int hsh_order(int terms) {
+  switch (terms) {
+    case 4:
+      return 2;
+    case 9:
+      return 3;
+    case 16:
+      return 4;
+    default:
+      return 0;
+  }
+}
+
+void hsh_basis(int terms, const Eigen::Vector3d& dir, double* out) {
+  const double norm = dir.norm();
+  const Eigen::Vector3d d = dir / norm;
+  const double theta = std::min(std::acos(std::clamp(d.z(), -1.0, 1.0)), kPi / 2 - kThetaMargin);
+  const double phi = std::atan2(d.y(), d.x());
+  const double c = std::cos(theta);
+  const double c2 = c * c;
+  const double s = std::sqrt(std::max(0.0, c - c2));
+  out[0] = 1.0 / std::sqrt(2.0 * kPi);
+  out[1] = std::sqrt(6.0 / kPi) * std::cos(phi) * s;
+  out[2] = std::sqrt(3.0 / (2.0 * kPi)) * (2.0 * c - 1.0);
+  out[3] = std::sqrt(6.0 / kPi) * std::sin(phi) * s;
+  if (terms <= 4) return;
+  const double k30 = std::sqrt(30.0 / kPi);
+  out[4] = k30 * std::cos(2.0 * phi) * (c2 - c);
+  out[5] = k30 * std::cos(phi) * (2.0 * c - 1.0) * s;
+  out[6] = std::sqrt(5.0 / (2.0 * kPi)) * (6.0 * c2 - 6.0 * c + 1.0);
+  out[7] = k30 * std::sin(phi) * (2.0 * c - 1.0) * s;
+  out[8] = k30 * std::sin(2.0 * phi) * (c2 - c);
+  if (terms <= 9) return;
+  const double s3 = s * s * s;
+  const double k35 = 2.0 * std::sqrt(35.0 / kPi);
+  const double k210 = std::sqrt(210.0 / kPi);
+  const double k21 = 2.0 * std::sqrt(21.0 / kPi);
+  const double q = 5.0 * c2 - 5.0 * c + 1.0;
+  out[9] = k35 * std::cos(3.0 * phi) * s3;
+  out[10] = k210 * std::cos(2.0 * phi) * (2.0 * c - 1.0) * (c2 - c);
+  out[11] = k21 * std::cos(phi) * s * q;
+  out[12] = std::sqrt(7.0 / (2.0 * kPi)) * (20.0 * c2 * c - 30.0 * c2 + 12.0 * c - 1.0);
+  out[13] = k21 * std::sin(phi) * s * q;
+  out[14] = k210 * std::sin(2.0 * phi) * (2.0 * c - 1.0) * (c2 - c);
+  out[15] = k35 * std::sin(3.0 * phi) * s3;
+}
+
+RtiMap::RtiMap(int w, int h, int t, ColourSpace cs)
+    : width(w),
+      height(h),
+      terms(t),
+      colour_space(cs),
+      coeffs(static_cast<std::size_t>(w) * h * 3 * t, 0.0f) {}
+
+RtiWriteReport write_rti(const fs::path& path, const RtiMap& map) {
+  const int t = map.terms;
+  if (hsh_order(t) == 0) {
+    throw Error(where(path) + ": an HSH .rti has 4, 9 or 16 terms, the map has " +
+                std::to_string(t));
+  }
+  if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * t) {
+    throw Error(where(path) + ": the map's size does not match its coefficients");
+  }
+  // Per term: the range over every texel and channel.
+  std::vector<float> lo(t, std::numeric_limits<float>::infinity());
+  std::vector<float> hi(t, -std::numeric_limits<float>::infinity());
+  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
+    const float v = map.coeffs[i];
+    if (!std::isfinite(v)) {
+      throw Error(where(path) + ": the map has a non-finite coefficient");
+    }
+    const auto k = static_cast<int>(i % static_cast<std::size_t>(t));
+    lo[k] = std::min(lo[k], v);
+    hi[k] = std::max(hi[k], v);
+  }
+  std::vector<float> scale(t), bias(t);
+  for (int k = 0; k < t; ++k) {
+    bias[k] = lo[k];
+    // A constant term still needs a non-zero scale (readers divide by it).
+    scale[k] = hi[k] > lo[k] ? hi[k] - lo[k] : 1e-6f;
+  }
+  std::ostringstream header;
+  header << "#HSH1.2\n3\n" << map.width << ' ' << map.height << " 3\n" << t << " 2 1\n";
+  std::string blob = header.str();
+  const std::size_t head = blob.size();
+  blob.resize(head + 2 * sizeof(float) * t + map.coeffs.size());
+  std::memcpy(blob.data() + head, scale.data(), sizeof(float) * t);
+  std::memcpy(blob.data() + head + sizeof(float) * t, bias.data(), sizeof(float) * t);
+  auto* bytes = reinterpret_cast<unsigned char*>(blob.data() + head + 2 * sizeof(float) * t);
+  RtiWriteReport report;
+  report.path = path;
+  double sum_sq = 0.0;
+  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
+    const auto k = static_cast<int>(i % static_cast<std::size_t>(t));
+    const double q = (map.coeffs[i] - bias[k]) / scale[k] * 255.0;
+    const auto b = static_cast<unsigned char>(std::clamp(std::lround(q), 0L, 255L));
+    bytes[i] = b;
+    const double back = b / 255.0 * scale[k] + bias[k];
+    const double e = std::abs(back - map.coeffs[i]);
+    report.max_coeff_error = std::max(report.max_coeff_error, e);
+    sum_sq += e * e;
+  }
+  report.rms_coeff_error = std::sqrt(sum_sq / static_cast<double>(map.coeffs.size()));
+  write_file_atomic(path, blob);
+  report.file_bytes = blob.size();
+  return report;
+}
+
+namespace {
+
+// Reads one header line (without its end, CR stripped); false at end of file.
+bool next_line(const std::string& data, std::size_t* pos, std::string* line) {
+  if (*pos >= data.size()) return false;
+  const std::size_t end = data.find('\n', *pos);
+  if (end == std::string::npos) return false;  // a header line must be terminated
+  *line = data.substr(*pos, end - *pos);
+  if (!line->empty() && line->back() == '\r') line->pop_back();
+  *pos = end + 1;
+  return true;
+}
+
+std::vector<long long> parse_ints(const fs::path& path, const std::string& line, int expected,
+                                  const char* what) {
+  std::istringstream in(line);
+  std::vector<long long> v;
+  long long x = 0;
+  while (in >> x) v.push_back(x);
+  in.clear();
+  std::string rest;
+  in >> rest;
+  if (static_cast<int>(v.size()) != expected || !rest.empty()) {
+    throw Error(where(path) + ": expected " + what + ", got '" + line + "'");
+  }
+  return v;
+}
+
+}  // namespace
+
+RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw Error(where(path) + ": cannot open the file");
+  const std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (f.bad()) throw Error(where(path) + ": cannot read the file");
+  std::size_t pos = 0;
+  std::string line;
+  do {
+    if (!next_line(data, &pos, &line)) {
+      throw Error(where(path) + ": not an .rti file (the header ends before the RTI type)");
+    }
+  } while (!line.empty() && line[0] == '#');
+  const long long type = parse_ints(path, line, 1, "the RTI type (3 = HSH)")[0];
+  if (type != 3) {
+    throw Error(where(path) + ": RTI type " + std::to_string(type) +
+                " is not supported (only 3, hemispherical harmonics)");
+  }
+  if (!next_line(data, &pos, &line)) throw Error(where(path) + ": the header ends early");
+  const auto size = parse_ints(path, line, 3, "'width height components'");
+  if (size[0] <= 0 || size[1] <= 0 || size[0] > kMaxSide || size[1] > kMaxSide ||
+      size[0] * size[1] > kMaxTexels) {
+    throw Error(where(path) + ": bad size " + std::to_string(size[0]) + " x " +
+                std::to_string(size[1]));
+  }
+  if (size[2] != 3) {
+    throw Error(where(path) + ": " + std::to_string(size[2]) +
+                " colour components; only 3 are supported");
+  }
+  if (!next_line(data, &pos, &line)) throw Error(where(path) + ": the header ends early");
+  const auto basis = parse_ints(path, line, 3, "'terms basis-type element-size'");
+  const int t = hsh_order(static_cast<int>(basis[0])) ? static_cast<int>(basis[0]) : 0;
+  if (t == 0) {
+    throw Error(where(path) + ": " + std::to_string(basis[0]) +
+                " basis terms; HSH files have 4, 9 or 16");
+  }
+  if (basis[2] != 1) {
+    throw Error(where(path) + ": element size " + std::to_string(basis[2]) +
+                " is not supported (only 1 byte)");
+  }
+  const int w = static_cast<int>(size[0]);
+  const int h = static_cast<int>(size[1]);
+  RtiMap map(w, h, t, colour_space);
+  const std::size_t floats = 2 * sizeof(float) * static_cast<std::size_t>(t);
+  const std::size_t expected = floats + map.coeffs.size();
+  const std::size_t present = data.size() - pos;
+  if (present < expected) {
+    throw Error(where(path) + ": the binary block is too short: expected " +
+                std::to_string(expected) + " bytes, found " + std::to_string(present));
+  }
+  std::vector<float> scale(t), bias(t);
+  std::memcpy(scale.data(), data.data() + pos, sizeof(float) * t);
+  std::memcpy(bias.data(), data.data() + pos + sizeof(float) * t, sizeof(float) * t);
+  for (int k = 0; k < t; ++k) {
+    if (!std::isfinite(scale[k]) || !std::isfinite(bias[k])) {
+      throw Error(where(path) + ": scale or bias " + std::to_string(k) + " is not finite");
+    }
+  }
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data() + pos + floats);
+  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
+    const auto k = static_cast<int>(i % static_cast<std::size_t>(t));
+    map.coeffs[i] = static_cast<float>(bytes[i] / 255.0 * scale[k] + bias[k]);
+  }
+  return map;
+}
+
+bool looks_like_rti(const fs::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  char head[8] = {};
+  if (!f.read(head, sizeof head) && f.gcount() < 2) return false;
+  if (head[0] == '#') return true;
+  return head[0] == '3' && (head[1] == '\n' || head[1] == '\r' || head[1] == ' ');
+}
+
+}  // namespace ptmkit::texture
