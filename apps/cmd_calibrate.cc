@@ -4,6 +4,7 @@
 
 #include "commands.h"
 #include "progress.h"
+#include "ptmkit/calib/camera.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/calib/sphere_refine.h"
@@ -53,6 +54,9 @@ struct SphereArgs {
   double outlier_px = 1.5;
   std::string mask;
   std::string principal;
+  std::string camera;
+  double focal_mm = 0.0;
+  double sensor_width_mm = 0.0;
   std::string overlays;
   std::string plot;
   std::vector<int> drop;
@@ -88,6 +92,32 @@ void run_sphere(const SphereArgs& args) {
   if (!args.plane.empty()) options.plane = read_plane_json(args.plane);
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
   const std::vector<Image> images = read_stack(files);
+  const int given = (args.camera.empty() ? 0 : 1) + (args.focal_mm > 0.0 ? 1 : 0) +
+                    (options.detection.camera.focal_px > 0.0 ? 1 : 0);
+  if (given > 1) throw Error("give the focal length once: --camera, --focal-mm or --focal-px");
+  if (!args.camera.empty()) {
+    // Intrinsics from `calibrate camera`: its focal length and principal point. Lens
+    // distortion is not removed from the photographs (it moves a highlight near the image
+    // centre by a fraction of a pixel with a normal lens).
+    const calib::CameraIntrinsics cam = calib::read_camera_json(args.camera);
+    if (cam.width_px != images.front().width() || cam.height_px != images.front().height()) {
+      throw Error(args.camera + ": the camera was calibrated at " + std::to_string(cam.width_px) +
+                  "x" + std::to_string(cam.height_px) + ", the photographs are " +
+                  std::to_string(images.front().width()) + "x" +
+                  std::to_string(images.front().height()));
+    }
+    options.detection.camera.focal_px = 0.5 * (cam.fx + cam.fy);
+    if (args.principal.empty()) {
+      options.detection.camera.principal_px = Eigen::Vector2d(cam.cx, cam.cy);
+    }
+  }
+  if (args.focal_mm > 0.0) {
+    if (!(args.sensor_width_mm > 0.0)) {
+      throw Error("--focal-mm needs --sensor-width-mm (the sensor's width in mm)");
+    }
+    options.detection.camera.focal_px =
+        args.focal_mm / args.sensor_width_mm * images.front().width();
+  }
   calib::RigReport report = calib::calibrate_rig(images, files, options);
   calib::drop_rig_lights(args.drop, &report);
   const int dropped = args.drop_outliers ? calib::drop_outliers(&report) : 0;
@@ -218,6 +248,15 @@ void add_calibrate_command(CLI::App& root) {
                  "Focal length in pixels for the perspective model (0 = orthographic)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  sp->add_option("--camera", sphere->camera,
+                 "Intrinsics (.json from `ptmkit calibrate camera`): focal length and principal "
+                 "point for the perspective model");
+  sp->add_option("--focal-mm", sphere->focal_mm,
+                 "Lens focal length in mm (with --sensor-width-mm) for the perspective model")
+      ->check(CLI::PositiveNumber);
+  sp->add_option("--sensor-width-mm", sphere->sensor_width_mm,
+                 "Sensor width in mm (the photographs' full width), for --focal-mm")
+      ->check(CLI::PositiveNumber);
   sp->add_option("--principal", sphere->principal,
                  "Principal point x,y in pixels (default: the image centre)");
   sp->add_option("--blob-fraction", sphere->options.blob_fraction,

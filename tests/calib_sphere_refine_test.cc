@@ -1,15 +1,18 @@
 // The sphere rig refined as a whole: two spheres of known size triangulate near lights on a
 // dome; a highlight that disagrees (a planted reflection, two spheres that see different
 // lights) is flagged, and dropped only when asked.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <numbers>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "ptmkit/calib/camera.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/calib/sphere_refine.h"
@@ -237,6 +240,11 @@ TEST(CalibSphereRefine, PlantedReflectionOnOneSphereIsFlaggedAsAmbiguous) {
   EXPECT_LT(bad.residual_px, 1e-3);
 }
 
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
 TEST(CalibSphereRefine, CommandTriangulatesWritesJsonAndDropsOutliersWhenAsked) {
   test::ScratchDir dir;
   const auto dirs = layout_directions("rings:45:4:10,80:1");
@@ -290,6 +298,37 @@ TEST(CalibSphereRefine, CommandTriangulatesWritesJsonAndDropsOutliersWhenAsked) 
   ASSERT_EQ(g.exit_code, 0) << g.err;
   EXPECT_THAT(g.out, ::testing::HasSubstr("pinhole distant model"));
   EXPECT_THAT(g.out, ::testing::HasSubstr("near lights?"));
+  // The same intrinsics from a `calibrate camera` file, or from the lens and sensor size,
+  // give the same lights; two sources at once are refused.
+  const std::string focal_lp = read_text(dir / "l.lp");
+  CameraIntrinsics cam;
+  cam.width_px = rig.width;
+  cam.height_px = rig.height;
+  cam.fx = cam.fy = 1500.0;
+  cam.cx = 319.5;
+  cam.cy = 199.5;
+  write_camera_json(dir / "camera.json", cam);
+  auto with_camera = near;
+  const auto focal_at = std::find(with_camera.begin(), with_camera.end(), "--focal-px");
+  *focal_at = "--camera";
+  *(focal_at + 1) = (dir / "camera.json").string();
+  with_camera.push_back("--drop-outliers");
+  const auto c = test::run_ptmkit(with_camera);
+  ASSERT_EQ(c.exit_code, 0) << c.err;
+  EXPECT_EQ(read_text(dir / "l.lp"), focal_lp);
+  auto with_lens = with_camera;
+  const auto camera_at = std::find(with_lens.begin(), with_lens.end(), "--camera");
+  *camera_at = "--focal-mm";
+  *(camera_at + 1) = "35";  // 35 mm on a sensor 640 * 35 / 1500 mm wide: f = 1500 px
+  with_lens.insert(with_lens.end(), {"--sensor-width-mm", std::to_string(640.0 * 35.0 / 1500.0)});
+  const auto l = test::run_ptmkit(with_lens);
+  ASSERT_EQ(l.exit_code, 0) << l.err;
+  EXPECT_EQ(read_lp(dir / "l.lp").size(), dirs.size() - 1);
+  auto both = with_camera;
+  both.insert(both.end(), {"--focal-px", "1500"});
+  const auto b = test::run_ptmkit(both);
+  EXPECT_EQ(b.exit_code, 1);
+  EXPECT_THAT(b.err, ::testing::HasSubstr("focal length once"));
   // Positions need two spheres: one sphere with a radius in mm is refused.
   auto one = args;
   one.insert(one.end(), {"--spheres", "1", "--focal-px", "1500", "--sphere-radius-mm", "25", "-o",
