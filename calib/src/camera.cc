@@ -11,6 +11,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/json_file.h"
 
 namespace ptmkit::calib {
 
@@ -143,15 +144,7 @@ std::vector<Eigen::Vector2d> CameraIntrinsics::undistort(
 
 CameraIntrinsics read_camera_json(const std::filesystem::path& path) {
   const std::string where = path.string();
-  std::ifstream in(path);
-  if (!in) throw Error(where + ": cannot open the camera file");
-  json j;
-  try {
-    j = json::parse(in);
-  } catch (const json::exception& e) {
-    throw Error(where + ": not valid JSON (" + e.what() + ")");
-  }
-  if (!j.is_object()) throw Error(where + ": expected a JSON object");
+  const nlohmann::json j = read_json_object(path, "camera file");
   CameraIntrinsics c;
   try {
     c.width_px = j.at("width_px").get<int>();

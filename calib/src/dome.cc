@@ -9,6 +9,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/json_file.h"
 #include "ptmkit/core/light_layout.h"
 
 namespace ptmkit::calib {
@@ -117,15 +118,7 @@ LightSet dome_light_set(const DomeOptions& options) {
 }
 
 LightSet read_dome_json(const std::filesystem::path& path, const DomeOptions& defaults) {
-  std::ifstream in(path);
-  if (!in) throw Error(where(path) + ": cannot open dome description");
-  nlohmann::json j;
-  try {
-    in >> j;
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(where(path) + ": not valid JSON: " + e.what());
-  }
-  if (!j.is_object()) throw Error(where(path) + ": expected a JSON object");
+  const nlohmann::json j = read_json_object(path, "dome description");
   DomeOptions o = defaults;
   try {
     if (j.contains("radius_mm")) o.radius_mm = j.at("radius_mm").get<double>();

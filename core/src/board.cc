@@ -10,6 +10,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/json_file.h"
 
 namespace ptmkit {
 
@@ -158,15 +159,7 @@ TagBoard grid_board(const std::string& family, double tag_size_mm, int cols, int
 
 TagBoard read_board_json(const std::filesystem::path& path) {
   const std::string where = path.string();
-  std::ifstream in(path);
-  if (!in) throw Error(where + ": cannot open the board file");
-  json j;
-  try {
-    j = json::parse(in);
-  } catch (const json::exception& e) {
-    throw Error(where + ": not valid JSON (" + e.what() + ")");
-  }
-  if (!j.is_object()) throw Error(where + ": expected a JSON object");
+  const nlohmann::json j = read_json_object(path, "board file");
   TagBoard board;
   try {
     if (j.contains("family")) {

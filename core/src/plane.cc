@@ -11,6 +11,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/json_file.h"
 
 namespace ptmkit {
 
@@ -76,15 +77,7 @@ json rows_of(const Eigen::Matrix3d& m) {
 
 SamplePlane read_plane_json(const std::filesystem::path& path) {
   const std::string where = path.string();
-  std::ifstream in(path);
-  if (!in) throw Error(where + ": cannot open the sample-plane file");
-  json j;
-  try {
-    j = json::parse(in);
-  } catch (const json::exception& e) {
-    throw Error(where + ": not valid JSON (" + e.what() + ")");
-  }
-  if (!j.is_object()) throw Error(where + ": expected a JSON object");
+  const nlohmann::json j = read_json_object(path, "sample-plane file");
   SamplePlane plane;
   try {
     plane.width_px = j.at("width_px").get<int>();
