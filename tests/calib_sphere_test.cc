@@ -136,6 +136,51 @@ TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
   EXPECT_LE(e_refined.mean, 0.5);  // the orthographic model is measurably worse off-axis
 }
 
+// A sphere partly outside the frame and held by a stand (a grey rod from below touching its
+// outline): found automatically, and every light either right or flagged, never wrong.
+TEST(CalibSphere, CroppedSphereOnAStandIsFoundAndItsLightsAreRightOrFlagged) {
+  const auto lights = test_lights();
+  synth::SphereRigOptions rig;
+  rig.width = 360;
+  rig.height = 320;
+  rig.centre_px = {95.3, 150.6};  // 15 px of the left side cut off by the frame
+  rig.radius_px = 110.0;
+  rig.noise_grey = 1.0;
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    rig.light_dir = lights[i];
+    rig.seed = i + 1;
+    Image im = synth::render_sphere_rig(rig);
+    for (int y = 0; y < im.height(); ++y) {  // the stand
+      for (int x = 0; x < im.width(); ++x) {
+        const double dx = x - rig.centre_px.x(), dy = y - rig.centre_px.y();
+        if (std::abs(dx) <= 12.0 && dy > 0.0 && std::hypot(dx, dy) > rig.radius_px) {
+          im.at(x, y, 0) = 0.15f;
+        }
+      }
+    }
+    images.push_back(std::move(im));
+    names.emplace_back("crop" + std::to_string(i) + ".png");
+  }
+  const SphereReport found = calibrate_sphere(images, names, {});
+  std::printf("cropped sphere on a stand: found at (%.2f, %.2f) r %.2f (true %.2f, %.2f, %.2f)\n",
+              found.sphere.centre_px.x(), found.sphere.centre_px.y(), found.sphere.radius_px,
+              rig.centre_px.x(), rig.centre_px.y(), rig.radius_px);
+  EXPECT_LT((found.sphere.centre_px - rig.centre_px).norm(), 1.0);
+  EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, 1.0);
+  int usable = 0;
+  double worst = 0.0;
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    if (!found.lights[i].found) continue;
+    ++usable;
+    worst = std::max(worst, angle_deg(found.lights[i].direction, lights[i]));
+  }
+  std::printf("  %d of %zu lights usable, worst %.3f deg\n", usable, lights.size(), worst);
+  EXPECT_GE(usable, static_cast<int>(lights.size()) - 2);
+  EXPECT_LT(worst, 0.5);
+}
+
 TEST(CalibSphere, UnusableImagesAreFlaggedNotGuessed) {
   synth::SphereRigOptions rig;
   rig.light_dir = {0.2, 0.3, 0.9};
