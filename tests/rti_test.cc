@@ -1,6 +1,7 @@
 // HSH .rti files: basis agreement between stages, write/read round trip, malformed files,
 // relighting (library and CLI).
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <fstream>
@@ -166,6 +167,27 @@ TEST(RtiRelight, MatchesTheBasisSumAndTheCli) {
   EXPECT_EQ(run.exit_code, 0) << run.err;
   EXPECT_TRUE(std::filesystem::exists(out));
   EXPECT_NE(run.out.find("HSH 9 terms"), std::string::npos) << run.out;
+  // `ptmkit info` describes it: order, size, and each term's range as stored.
+  const test::RunResult info = test::run_ptmkit({"info", path.string(), "--json"});
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const auto j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j["hsh_order"], 3);
+  EXPECT_EQ(j["terms"], 9);
+  EXPECT_EQ(j["width"], 6);
+  EXPECT_EQ(j["height"], 4);
+  for (int k = 0; k < 9; ++k) {
+    float lo = 1e9f, hi = -1e9f;
+    for (std::size_t i = static_cast<std::size_t>(k); i < r.coeffs.size(); i += 9) {
+      lo = std::min(lo, r.coeffs[i]);
+      hi = std::max(hi, r.coeffs[i]);
+    }
+    EXPECT_NEAR(j["coeff_min"][static_cast<std::size_t>(k)].get<double>(), lo, 1e-6);
+    EXPECT_NEAR(j["coeff_max"][static_cast<std::size_t>(k)].get<double>(), hi, 1e-6);
+  }
+  const test::RunResult text = test::run_ptmkit({"info", path.string()});
+  EXPECT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("RTI HSH order 3 (9 terms per channel), 6 x 4 texels"), std::string::npos)
+      << text.out;
 }
 
 }  // namespace
