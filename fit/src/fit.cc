@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <optional>
+#include <type_traits>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -14,6 +15,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "pinv_kernel.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
@@ -32,6 +34,43 @@ double seconds_since(Clock::time_point t0) {
 using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using SampleMap = Eigen::Map<const RowMajorF, 0, Eigen::OuterStride<>>;
 using CoeffMap = Eigen::Map<Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>>;
+
+// One image's row of the luminance models: luma into yi and the per-texel sums (see fit_row).
+// Compiled for AVX2 and for the baseline, chosen at run time; element-wise float operations in
+// a fixed order, so both give the same bits.
+__attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float* s, int w,
+                                                                     float* yi, float* s0,
+                                                                     float* s1, float* s2,
+                                                                     float* s3) {
+  constexpr auto kR = static_cast<float>(kLumaR);
+  constexpr auto kG = static_cast<float>(kLumaG);
+  constexpr auto kB = static_cast<float>(kLumaB);
+  for (int x = 0; x < w; ++x) {
+    const float l = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
+    yi[x] = l;
+    s0[x] += l * l;
+    s1[x] += l * s[3 * x];
+    s2[x] += l * s[3 * x + 1];
+    s3[x] += l * s[3 * x + 2];
+  }
+}
+
+// The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
+__attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float* s, int w,
+                                                                    float* yi, float* s0, float* s1,
+                                                                    float* s2) {
+  constexpr auto kR = static_cast<float>(kLumaR);
+  constexpr auto kG = static_cast<float>(kLumaG);
+  constexpr auto kB = static_cast<float>(kLumaB);
+  for (int x = 0; x < w; ++x) {
+    const float l = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
+    yi[x] = l;
+    const float wgt = std::max(0.0f, l);
+    s0[x] += wgt;
+    s1[x] += wgt * (s[3 * x + 2] - l) * static_cast<float>(1.0 / 1.772);
+    s2[x] += wgt * (s[3 * x] - l) * static_cast<float>(1.0 / 1.402);
+  }
+}
 
 // Histogram of |residual| in grey levels: 0.05-grey bins up to 256, one overflow bin.
 constexpr double kHistBinGrey = 0.05;
@@ -200,6 +239,11 @@ class BandFitter {
     CoeffMap c(out, kPtmTerms, m);
     if (options_.precision == Precision::kDouble) {
       c = (design_.pseudo_inverse() * s.template cast<double>()).template cast<float>();
+    } else if constexpr (std::is_same_v<Samples, SampleMap> ||
+                         std::is_same_v<Samples, Eigen::Map<const RowMajorF>>) {
+      internal::apply_pinv(design_.pseudo_inverse_f().data(),
+                           static_cast<int>(design_.pseudo_inverse_f().cols()), s.data(),
+                           static_cast<std::ptrdiff_t>(s.outerStride()), m, out);
     } else {
       c.noalias() = design_.pseudo_inverse_f() * s;
     }
@@ -246,21 +290,22 @@ class BandFitter {
     // image (each image's row is contiguous), makes the luma and the per-texel sums the colour
     // needs; walking texel by texel instead would stride across all N images per texel.
     const bool lrgb = options_.model == ColourModel::kLRGB;
-    RowMajorF y(n, w);
+    // Scratch reused row after row (a fresh 0.8 MB buffer per row would be mapped and unmapped
+    // by the allocator each time, and the page faults and TLB flushes cost more than the fit).
+    thread_local std::vector<float> y_scratch, sum_scratch;
+    y_scratch.resize(static_cast<std::size_t>(n) * w);
+    sum_scratch.assign(static_cast<std::size_t>(w) * 4, 0.0f);
+    const Eigen::Map<const RowMajorF> y(y_scratch.data(), n, w);
     // Per texel, one array each (so the loop vectorises): LRGB sum Y^2, sum Y r, sum Y g,
     // sum Y b; YCC sum w, sum w Cb, sum w Cr. Float sums of N terms below 1 keep a relative
     // error near N * 6e-8, far below what an 8-bit colour can show.
-    std::vector<float> sums(static_cast<std::size_t>(w) * 4, 0.0f);
-    float* s0 = sums.data();
+    float* s0 = sum_scratch.data();
     float* s1 = s0 + w;
     float* s2 = s1 + w;
     float* s3 = s2 + w;
-    constexpr auto kR = static_cast<float>(kLumaR);
-    constexpr auto kG = static_cast<float>(kLumaG);
-    constexpr auto kB = static_cast<float>(kLumaB);
     for (int i = 0; i < n; ++i) {
       const float* s = samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride();
-      float* yi = y.data() + static_cast<std::ptrdiff_t>(i) * w;
+      float* yi = y_scratch.data() + static_cast<std::ptrdiff_t>(i) * w;
       if (ch != 3) {  // grey: colour (1, 1, 1) up to scale, chroma 0
         for (int x = 0; x < w; ++x) {
           yi[x] = s[x];
@@ -268,26 +313,10 @@ class BandFitter {
         }
         continue;
       }
-      for (int x = 0; x < w; ++x) {
-        yi[x] = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
-      }
       if (lrgb) {
-        for (int x = 0; x < w; ++x) {
-          const float l = yi[x];
-          s0[x] += l * l;
-          s1[x] += l * s[3 * x];
-          s2[x] += l * s[3 * x + 1];
-          s3[x] += l * s[3 * x + 2];
-        }
+        luma_lrgb_row(s, w, yi, s0, s1, s2, s3);
       } else {
-        // The seed paper's constant chromaticity: luminance-weighted mean Cb and Cr.
-        for (int x = 0; x < w; ++x) {
-          const float l = yi[x];
-          const float wgt = std::max(0.0f, l);
-          s0[x] += wgt;
-          s1[x] += wgt * (s[3 * x + 2] - l) * static_cast<float>(1.0 / 1.772);
-          s2[x] += wgt * (s[3 * x] - l) * static_cast<float>(1.0 / 1.402);
-        }
+        luma_ycc_row(s, w, yi, s0, s1, s2);
       }
     }
     if (ch != 3) {
