@@ -27,8 +27,15 @@ AtomicOutput::AtomicOutput(fs::path target) : target_(std::move(target)) {
   }
   // Hidden, unique, same folder (so rename is atomic), same extension (so writers that pick
   // the type from the extension still work).
-  temp_ = dir / ("." + target_.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                 std::to_string(g_counter.fetch_add(1)) + target_.extension().string());
+  // Built with append: GCC 12 warns falsely (-Wrestrict) on "literal" + std::string chains.
+  std::string name = ".";
+  name.append(target_.stem().string())
+      .append(".tmp-")
+      .append(std::to_string(::getpid()))
+      .append("-")
+      .append(std::to_string(g_counter.fetch_add(1)))
+      .append(target_.extension().string());
+  temp_ = dir / name;
 }
 
 AtomicOutput::~AtomicOutput() {
