@@ -96,27 +96,18 @@ void run_sphere(const SphereArgs& args) {
                     (options.detection.camera.focal_px > 0.0 ? 1 : 0);
   if (given > 1) throw Error("give the focal length once: --camera, --focal-mm or --focal-px");
   if (!args.camera.empty()) {
-    // Intrinsics from `calibrate camera`: its focal length and principal point. Lens
-    // distortion is not removed from the photographs (it moves a highlight near the image
-    // centre by a fraction of a pixel with a normal lens).
-    const calib::CameraIntrinsics cam = calib::read_camera_json(args.camera);
-    if (cam.width_px != images.front().width() || cam.height_px != images.front().height()) {
-      throw Error(args.camera + ": the camera was calibrated at " + std::to_string(cam.width_px) +
-                  "x" + std::to_string(cam.height_px) + ", the photographs are " +
-                  std::to_string(images.front().width()) + "x" +
-                  std::to_string(images.front().height()));
-    }
-    options.detection.camera.focal_px = 0.5 * (cam.fx + cam.fy);
-    if (args.principal.empty()) {
-      options.detection.camera.principal_px = Eigen::Vector2d(cam.cx, cam.cy);
-    }
+    const calib::SphereCamera cam =
+        calib::sphere_camera(calib::read_camera_json(args.camera), images.front().width(),
+                             images.front().height(), args.camera);
+    options.detection.camera.focal_px = cam.focal_px;
+    if (args.principal.empty()) options.detection.camera.principal_px = cam.principal_px;
   }
   if (args.focal_mm > 0.0) {
     if (!(args.sensor_width_mm > 0.0)) {
       throw Error("--focal-mm needs --sensor-width-mm (the sensor's width in mm)");
     }
     options.detection.camera.focal_px =
-        args.focal_mm / args.sensor_width_mm * images.front().width();
+        calib::focal_px_from_lens(args.focal_mm, args.sensor_width_mm, images.front().width());
   }
   calib::RigReport report = calib::calibrate_rig(images, files, options);
   calib::drop_rig_lights(args.drop, &report);

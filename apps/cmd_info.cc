@@ -1,12 +1,7 @@
 // ptmkit info IN.ptm|IN.rti [--json]: what a texture file holds.
-#include <algorithm>
-#include <cstdint>
 #include <cstdio>
-#include <filesystem>
-#include <limits>
 #include <memory>
 #include <string>
-#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -25,45 +20,32 @@ struct InfoArgs {
 
 // An HSH .rti: its basis and the range of each term's coefficients over texels and channels.
 void run_rti_info(const InfoArgs& args) {
-  const texture::RtiMap map = texture::read_rti(args.input);
-  const auto file_bytes = std::filesystem::file_size(args.input);
-  std::vector<double> lo(static_cast<std::size_t>(map.terms),
-                         std::numeric_limits<double>::infinity());
-  std::vector<double> hi(lo.size(), -std::numeric_limits<double>::infinity());
-  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
-    const auto k = i % static_cast<std::size_t>(map.terms);
-    lo[k] = std::min(lo[k], static_cast<double>(map.coeffs[i]));
-    hi[k] = std::max(hi[k], static_cast<double>(map.coeffs[i]));
-  }
-  const int file_bytes_per_texel = 3 * map.terms;
-  const int map_bytes_per_texel = 3 * map.terms * static_cast<int>(sizeof(float));
+  const texture::RtiSummary s = texture::summarise_rti(args.input);
   if (args.json) {
     nlohmann::json j;
     j["file"] = args.input;
     j["format"] = "RTI_HSH";
-    j["hsh_order"] = texture::hsh_order(map.terms);
-    j["terms"] = map.terms;
-    j["width"] = map.width;
-    j["height"] = map.height;
-    j["coeff_min"] = lo;
-    j["coeff_max"] = hi;
-    j["file_bytes"] = file_bytes;
-    j["file_bytes_per_texel"] = file_bytes_per_texel;
-    j["map_bytes_per_texel"] = map_bytes_per_texel;
+    j["hsh_order"] = s.order;
+    j["terms"] = s.terms;
+    j["width"] = s.width;
+    j["height"] = s.height;
+    j["coeff_min"] = s.coeff_min;
+    j["coeff_max"] = s.coeff_max;
+    j["file_bytes"] = s.file_bytes;
+    j["file_bytes_per_texel"] = s.file_bytes_per_texel;
+    j["map_bytes_per_texel"] = s.map_bytes_per_texel;
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
-  std::printf("%s: RTI HSH order %d (%d terms per channel), %d x %d texels, %ju bytes\n",
-              args.input.c_str(), texture::hsh_order(map.terms), map.terms, map.width, map.height,
-              static_cast<std::uintmax_t>(file_bytes));
+  std::printf("%s: RTI HSH order %d (%d terms per channel), %d x %d texels, %zu bytes\n",
+              args.input.c_str(), s.order, s.terms, s.width, s.height, s.file_bytes);
   std::printf("  coefficients (normalised units, after the file's scale and bias):\n");
   std::printf("    term   min          max\n");
-  for (int k = 0; k < map.terms; ++k) {
-    std::printf("    h%-3d  %11.5f  %11.5f\n", k, lo[static_cast<std::size_t>(k)],
-                hi[static_cast<std::size_t>(k)]);
+  for (std::size_t k = 0; k < s.coeff_min.size(); ++k) {
+    std::printf("    h%-3zu  %11.5f  %11.5f\n", k, s.coeff_min[k], s.coeff_max[k]);
   }
   std::printf("  memory per texel: %d bytes in the file, %d bytes as floats in memory\n",
-              file_bytes_per_texel, map_bytes_per_texel);
+              s.file_bytes_per_texel, s.map_bytes_per_texel);
 }
 
 void run_info(const InfoArgs& args) {

@@ -1,6 +1,7 @@
 #include "ptmkit/calib/camera.h"
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <string>
 
@@ -140,6 +141,29 @@ std::vector<Eigen::Vector2d> CameraIntrinsics::undistort(
   std::vector<Eigen::Vector2d> result;
   for (const auto& p : out) result.emplace_back(p.x, p.y);
   return result;
+}
+
+SphereCamera sphere_camera(const CameraIntrinsics& camera, int width_px, int height_px,
+                           const std::filesystem::path& source) {
+  if (camera.width_px != width_px || camera.height_px != height_px) {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  ": the camera was calibrated at %dx%d, the photographs are %dx%d",
+                  camera.width_px, camera.height_px, width_px, height_px);
+    throw Error(source.string() + text);
+  }
+  SphereCamera out;
+  out.focal_px = 0.5 * (camera.fx + camera.fy);
+  out.principal_px = Eigen::Vector2d(camera.cx, camera.cy);
+  return out;
+}
+
+double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px) {
+  if (!(focal_mm > 0.0) || !(sensor_width_mm > 0.0) || !std::isfinite(focal_mm) ||
+      !std::isfinite(sensor_width_mm)) {
+    throw Error("the lens focal length and the sensor width must both be positive (mm)");
+  }
+  return focal_mm / sensor_width_mm * width_px;
 }
 
 CameraIntrinsics read_camera_json(const std::filesystem::path& path) {

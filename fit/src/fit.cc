@@ -385,6 +385,50 @@ class BandFitter {
 
   // The fitted model's RGB for light i of a texel (grey input: rgb[0] is the grey value);
   // `g`: the texel's own geometry under near lights (null: the shared design).
+  // One texel's LRGB colour (which also rescales coef, see finish_lrgb_colour) or YCC chroma,
+  // from its samples s (n x channels), labelling values and per-sample weights.
+  void texel_colour(const std::vector<double>& s, int n, const double* value, const double* weights,
+                    float* coef, float* col) const {
+    const int ch = channels_;
+    if (options_.model == ColourModel::kLRGB) {
+      double yy = 0.0;
+      double yc[3] = {0.0, 0.0, 0.0};
+      for (int i = 0; i < n; ++i) {
+        const double w = weights[i];
+        const double yi = value[i];
+        yy += w * yi * yi;
+        for (int k = 0; k < 3; ++k)
+          yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+      }
+      finish_lrgb_colour(yy, yc, col, coef);
+      return;
+    }
+    double sy = 0.0, scb = 0.0, scr = 0.0;
+    if (ch == 3) {
+      for (int i = 0; i < n; ++i) {
+        const double* p = s.data() + static_cast<std::size_t>(i) * 3;
+        const auto ycc = to_ycbcr(p[0], p[1], p[2]);
+        const double wgt = weights[i] * std::max(0.0, ycc.y);
+        sy += wgt;
+        scb += wgt * ycc.cb;
+        scr += wgt * ycc.cr;
+      }
+    }
+    finish_ycc_chroma(sy, scb, scr, col);
+  }
+
+  // Residuals of one texel's fit against its samples, into the row's statistics.
+  void texel_residuals(const std::vector<double>& s, int n, const float* coef, const float* col,
+                       const TexelGeometry* g, RowStats* st) const {
+    const int ch = channels_;
+    for (int i = 0; i < n; ++i) {
+      double rgb[3];
+      model_rgb(coef, col, i, rgb, g);
+      for (int k = 0; k < ch; ++k)
+        st->add(255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]));
+    }
+  }
+
   void model_rgb(const float* coef, const float* col, int i, double rgb[3],
                  const TexelGeometry* g = nullptr) const {
     const auto b = design_.design().row(i);
@@ -553,40 +597,9 @@ class BandFitter {
         }
       } else {
         store(value.data(), coef);
-        if (options_.model == ColourModel::kLRGB) {
-          double yy = 0.0;
-          double yc[3] = {0.0, 0.0, 0.0};
-          for (int i = 0; i < n; ++i) {
-            const double w = weights[static_cast<std::size_t>(i)];
-            const double yi = value[static_cast<std::size_t>(i)];
-            yy += w * yi * yi;
-            for (int k = 0; k < 3; ++k)
-              yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
-          }
-          finish_lrgb_colour(yy, yc, col, coef);
-        } else {
-          double sy = 0.0, scb = 0.0, scr = 0.0;
-          if (ch == 3) {
-            for (int i = 0; i < n; ++i) {
-              const double* p = s.data() + static_cast<std::size_t>(i) * 3;
-              const auto ycc = to_ycbcr(p[0], p[1], p[2]);
-              const double wgt = weights[static_cast<std::size_t>(i)] * std::max(0.0, ycc.y);
-              sy += wgt;
-              scb += wgt * ycc.cb;
-              scr += wgt * ycc.cr;
-            }
-          }
-          finish_ycc_chroma(sy, scb, scr, col);
-        }
+        texel_colour(s, n, value.data(), weights.data(), coef, col);
       }
-      if (st->active) {
-        for (int i = 0; i < n; ++i) {
-          double rgb[3];
-          model_rgb(coef, col, i, rgb);
-          for (int k = 0; k < ch; ++k)
-            st->add(255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]));
-        }
-      }
+      if (st->active) texel_residuals(s, n, coef, col, nullptr, st);
       if (extras_) {
         texel_extras(s, value.data(), weights.data(), labels.data(), coef, col, x, band.y0 + r);
       }
@@ -665,39 +678,9 @@ class BandFitter {
         for (int k = 0; k < 3; ++k) store(ch == 3 ? k : 0, coef + k * kPtmTerms);
       } else {
         store(0, coef);
-        if (options_.model == ColourModel::kLRGB) {
-          double yy = 0.0;
-          double yc[3] = {0.0, 0.0, 0.0};
-          for (int i = 0; i < n; ++i) {
-            const double yi = value[static_cast<std::size_t>(i)];
-            yy += yi * yi;
-            for (int k = 0; k < 3; ++k)
-              yc[k] += yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
-          }
-          finish_lrgb_colour(yy, yc, col, coef);
-        } else {
-          double sy = 0.0, scb = 0.0, scr = 0.0;
-          if (ch == 3) {
-            for (int i = 0; i < n; ++i) {
-              const double* p = s.data() + static_cast<std::size_t>(i) * 3;
-              const auto ycc = to_ycbcr(p[0], p[1], p[2]);
-              const double wgt = std::max(0.0, ycc.y);
-              sy += wgt;
-              scb += wgt * ycc.cb;
-              scr += wgt * ycc.cr;
-            }
-          }
-          finish_ycc_chroma(sy, scb, scr, col);
-        }
+        texel_colour(s, n, value.data(), weights.data(), coef, col);  // weights all 1
       }
-      if (st->active) {
-        for (int i = 0; i < n; ++i) {
-          double rgb[3];
-          model_rgb(coef, col, i, rgb, &g);
-          for (int k = 0; k < ch; ++k)
-            st->add(255.0 * (s[static_cast<std::size_t>(i * ch + k)] - rgb[k]));
-        }
-      }
+      if (st->active) texel_residuals(s, n, coef, col, &g, st);
       if (extras_) {
         texel_extras(s, value.data(), weights.data(), labels.data(), coef, col, x, y, &g);
       }

@@ -210,4 +210,25 @@ bool looks_like_rti(const fs::path& path) {
   return head[0] == '3' && (head[1] == '\n' || head[1] == '\r' || head[1] == ' ');
 }
 
+RtiSummary summarise_rti(const std::filesystem::path& path) {
+  const RtiMap map = read_rti(path);
+  RtiSummary out;
+  out.width = map.width;
+  out.height = map.height;
+  out.terms = map.terms;
+  out.order = hsh_order(map.terms);
+  const auto terms = static_cast<std::size_t>(map.terms);
+  out.coeff_min.assign(terms, std::numeric_limits<double>::infinity());
+  out.coeff_max.assign(terms, -std::numeric_limits<double>::infinity());
+  for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
+    const std::size_t k = i % terms;
+    out.coeff_min[k] = std::min(out.coeff_min[k], static_cast<double>(map.coeffs[i]));
+    out.coeff_max[k] = std::max(out.coeff_max[k], static_cast<double>(map.coeffs[i]));
+  }
+  out.file_bytes = static_cast<std::size_t>(std::filesystem::file_size(path));
+  out.file_bytes_per_texel = 3 * map.terms;
+  out.map_bytes_per_texel = 3 * map.terms * static_cast<int>(sizeof(float));
+  return out;
+}
+
 }  // namespace ptmkit::texture

@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 
 #include "ptmkit/calib/apriltag.h"
+#include "ptmkit/calib/sphere.h"
 #include "ptmkit/core/board.h"
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/plane.h"
@@ -37,6 +38,17 @@ struct CameraIntrinsics {
 // JSON: {"width_px", "height_px", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3",
 // "rms_px"}. Errors (ptmkit::Error) name the file and the problem.
 [[nodiscard]] CameraIntrinsics read_camera_json(const std::filesystem::path& path);
+
+// The perspective camera of sphere calibration from intrinsics: the mean of fx and fy, and the
+// principal point (lens distortion is not removed from the photographs: near the image centre
+// it moves a highlight by a fraction of a pixel with a normal lens). Throws ptmkit::Error, naming
+// `source`, when the photographs are not the size the camera was calibrated at.
+[[nodiscard]] SphereCamera sphere_camera(const CameraIntrinsics& camera, int width_px,
+                                         int height_px, const std::filesystem::path& source = {});
+
+// Focal length in pixels of a lens of `focal_mm` on a sensor `sensor_width_mm` wide whose full
+// width is `width_px` pixels. Throws ptmkit::Error unless both lengths are positive.
+[[nodiscard]] double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px);
 void write_camera_json(const std::filesystem::path& path, const CameraIntrinsics& camera);
 
 struct CameraCalibrationOptions {

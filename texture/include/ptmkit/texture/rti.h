@@ -78,6 +78,21 @@ RtiWriteReport write_rti(const std::filesystem::path& path, const RtiMap& map);
 [[nodiscard]] RtiMap read_rti(const std::filesystem::path& path,
                               ColourSpace colour_space = ColourSpace::kSRGB);
 
+// What an .rti holds, for `ptmkit info`: its basis, size, and each term's coefficient range
+// over every texel and channel (normalised units, after the file's scale and bias).
+struct RtiSummary {
+  int width = 0;
+  int height = 0;
+  int terms = 0;
+  int order = 0;                             // HSH order: 2, 3 or 4
+  std::vector<double> coeff_min, coeff_max;  // per term
+  std::size_t file_bytes = 0;
+  int file_bytes_per_texel = 0;  // 3 x terms
+  int map_bytes_per_texel = 0;   // as floats in memory
+};
+// Reads and summarises an .rti (errors as read_rti).
+[[nodiscard]] RtiSummary summarise_rti(const std::filesystem::path& path);
+
 // True when the file starts like an .rti (a '#' comment line or the type line "3"), as
 // opposed to a .ptm ("PTM_1."). Reads only the first bytes; false when unreadable.
 [[nodiscard]] bool looks_like_rti(const std::filesystem::path& path);
