@@ -36,10 +36,8 @@ void run_camera(const CameraArgs& args) {
   if (!args.family.empty()) options.family = calib::parse_tag_family(args.family);
   options.fix_k3 = !args.free_k3;
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
-  std::vector<Image> images;
-  images.reserve(files.size());
-  for (const auto& f : files) images.push_back(read_image(f));
-  const calib::CameraReport report = calib::calibrate_camera(images, files, board, options);
+  const calib::CameraReport report = calib::calibrate_camera(
+      files.size(), [&](std::size_t i) { return read_image(files[i]); }, files, board, options);
   calib::write_camera_json(args.output, report.camera);
   if (!args.report.empty()) write_file_atomic(args.report, report.to_json() + "\n");
   const auto& c = report.camera;

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <string>
 
 #include <Eigen/LU>
@@ -239,23 +240,35 @@ std::string CameraReport::to_json() const {
 CameraReport calibrate_camera(const std::vector<Image>& images,
                               const std::vector<std::filesystem::path>& names,
                               const TagBoard& board, const CameraCalibrationOptions& options) {
+  return calibrate_camera(
+      images.size(), [&](std::size_t i) { return images[i]; }, names, board, options);
+}
+
+CameraReport calibrate_camera(std::size_t views, const std::function<Image(std::size_t)>& load,
+                              const std::vector<std::filesystem::path>& names,
+                              const TagBoard& board, const CameraCalibrationOptions& options) {
   if (const auto err = options.validate(); !err.empty()) throw Error("calibrate camera: " + err);
   if (const auto err = board.validate(); !err.empty()) throw Error("calibrate camera: " + err);
-  if (images.empty()) throw Error("calibrate camera: no images");
-  const int width = images.front().width(), height = images.front().height();
+  if (views == 0) throw Error("calibrate camera: no images");
+  int width = 0, height = 0;
   CameraReport report;
   std::vector<std::vector<cv::Point3f>> object;
   std::vector<std::vector<cv::Point2f>> image_points;
   std::vector<std::size_t> used_index;
-  for (std::size_t i = 0; i < images.size(); ++i) {
+  for (std::size_t i = 0; i < views; ++i) {
     CameraView view;
     view.image = view_name(names, i);
-    if (images[i].width() != width || images[i].height() != height) {
-      throw Error("calibrate camera: " + view.image + " is " + std::to_string(images[i].width()) +
-                  "x" + std::to_string(images[i].height()) + ", the first view is " +
-                  std::to_string(width) + "x" + std::to_string(height));
+    const Image image = load(i);  // one view in memory at a time
+    if (i == 0) {
+      width = image.width();
+      height = image.height();
     }
-    const Matches m = match_board(images[i].view(), board, options.detector, options.family);
+    if (image.width() != width || image.height() != height) {
+      throw Error("calibrate camera: " + view.image + " is " + std::to_string(image.width()) + "x" +
+                  std::to_string(image.height()) + ", the first view is " + std::to_string(width) +
+                  "x" + std::to_string(height));
+    }
+    const Matches m = match_board(image.view(), board, options.detector, options.family);
     view.tags_detected = m.detected;
     view.tags_used = m.tags;
     if (m.tags < options.min_tags_per_view) {

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -98,6 +99,14 @@ struct CameraReport {
 // are usable (the message lists why each was rejected), for mixed image sizes, bad options,
 // or an unknown family.
 [[nodiscard]] CameraReport calibrate_camera(const std::vector<Image>& images,
+                                            const std::vector<std::filesystem::path>& names,
+                                            const TagBoard& board,
+                                            const CameraCalibrationOptions& options = {});
+// The same, loading view i by load(i) when it is needed, so only one photograph is in memory
+// at a time (what `ptmkit calibrate camera` uses: a board shot at 24 megapixels is 290 MB as
+// floats).
+[[nodiscard]] CameraReport calibrate_camera(std::size_t views,
+                                            const std::function<Image(std::size_t)>& load,
                                             const std::vector<std::filesystem::path>& names,
                                             const TagBoard& board,
                                             const CameraCalibrationOptions& options = {});
