@@ -16,14 +16,17 @@ int main(int argc, char** argv) {
   }
   try {
     const int threads = argc > 2 ? std::atoi(argv[2]) : 0;
-    const int band_rows = argc > 3 ? std::atoi(argv[3]) : 16;
+    const int band_rows = argc > 3 ? std::atoi(argv[3]) : 8;
     const ptmkit::ThreadLimit limit(threads);
     const auto t0 = std::chrono::steady_clock::now();
     const ptmkit::LightSet lights = ptmkit::read_lp(argv[1]);
     ptmkit::StackReader reader(lights.images());
     ptmkit::StackBand band;
     double checksum = 0.0;
-    while (reader.read_band(band_rows, &band)) checksum += band.samples[band.samples.size() / 2];
+    // The same storage the fit asks for: 8-bit files stay bytes.
+    while (reader.read_band(band_rows, &band, ptmkit::BandStorage::kNative8)) {
+      checksum += band.sample(band.images / 2, band.rows / 2, band.width / 2, 0);
+    }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("decoded %d images of %dx%dx%d in %.3f s (%.1f Mpixel/s; checksum %.3f)\n",
                 reader.count(), reader.width(), reader.height(), reader.channels(), s,

@@ -139,6 +139,36 @@ TEST(StackReader, BandsReassembleTheImagesInAnyBandSize) {
   }
 }
 
+TEST(StackReader, EightBitFilesCanStayBytes) {
+  test::ScratchDir dir;
+  std::vector<fs::path> files;
+  for (int i = 0; i < 3; ++i) {
+    files.push_back(dir / ("img" + std::to_string(i) + ".png"));
+    write_image(files.back(), ramp(21, 9, 3, i).view(), {.format = PixelFormat::kU8});
+  }
+  StackReader as_float(files), as_bytes(files);
+  StackBand f, b;
+  while (as_float.read_band(4, &f)) {
+    ASSERT_TRUE(as_bytes.read_band(4, &b, BandStorage::kNative8));
+    ASSERT_TRUE(b.is_u8);
+    ASSERT_FALSE(f.is_u8);
+    ASSERT_EQ(b.bytes.size(), f.samples.size());
+    EXPECT_TRUE(b.samples.empty());
+    for (std::size_t k = 0; k < f.samples.size(); ++k) {
+      // The same value both ways: v / 255 as a float.
+      ASSERT_EQ(static_cast<float>(b.bytes[k]) / 255.0f, f.samples[k]) << k;
+    }
+    EXPECT_EQ(b.sample(2, 1, 20, 2), f.sample(2, 1, 20, 2));
+  }
+  EXPECT_FALSE(as_bytes.read_band(4, &b, BandStorage::kNative8));
+  // 16-bit files are floats whatever is asked.
+  write_image(dir / "deep.png", ramp(5, 5, 3).view(), {.format = PixelFormat::kU16});
+  StackReader deep({dir / "deep.png"});
+  ASSERT_TRUE(deep.read_band(8, &b, BandStorage::kNative8));
+  EXPECT_FALSE(b.is_u8);
+  EXPECT_EQ(b.samples.size(), 75u);
+}
+
 TEST(StackReader, MismatchedImagesAreErrorsNamingTheFile) {
   test::ScratchDir dir;
   write_image(dir / "a.png", ramp(8, 8, 3).view());

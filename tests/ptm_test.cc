@@ -1,4 +1,5 @@
 // .ptm reading, writing, quantisation and streaming.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -533,6 +534,29 @@ TEST(PtmStream, MatchesWritePtmWithinHalfFloatRounding) {
         100.0 * static_cast<double>(differing) / static_cast<double>(a.data.size()),
         sum / static_cast<double>(n), worst,
         100.0 * static_cast<double>(above_one) / static_cast<double>(n));
+  }
+}
+
+// Above spill_above_bytes the half floats go to an unnamed temporary file: the same file comes
+// out, and nothing is left in the folder but it.
+TEST(PtmStream, SpilledCoefficientsGiveTheSameFile) {
+  test::ScratchDir dir;
+  for (const ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB, ColourModel::kYCC}) {
+    SCOPED_TRACE(std::string(to_string(model)));
+    const CoefficientMap map = smooth_map(70, 131, model);  // more rows than one slice
+    PtmWriteOptions spill;
+    spill.spill_above_bytes = 1;
+    PtmStreamWriter in_memory(dir / "memory.ptm"), spilled(dir / "spilled.ptm", spill);
+    in_memory.begin(1, 1, model, ColourSpace::kSRGB);
+    EXPECT_FALSE(in_memory.spilled());
+    spilled.begin(1, 1, model, ColourSpace::kSRGB);
+    EXPECT_TRUE(spilled.spilled());
+    stream_map(map, 9, in_memory);  // begins again, for the map's size
+    stream_map(map, 9, spilled);
+    EXPECT_EQ(read_ptm_file(dir / "memory.ptm").data, read_ptm_file(dir / "spilled.ptm").data);
+    EXPECT_EQ(in_memory.report().relit_mean_abs_grey, spilled.report().relit_mean_abs_grey);
+    EXPECT_EQ(in_memory.report().rms_coeff_error, spilled.report().rms_coeff_error);
+    EXPECT_THAT(test::list_files(dir.path()), ::testing::ElementsAre("memory.ptm", "spilled.ptm"));
   }
 }
 

@@ -8,6 +8,8 @@
 #include <optional>
 #include <type_traits>
 
+#include <immintrin.h>
+
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
@@ -52,6 +54,61 @@ __attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float
     s1[x] += l * s[3 * x];
     s2[x] += l * s[3 * x + 1];
     s3[x] += l * s[3 * x + 2];
+  }
+}
+
+// 8-bit samples to 0..1: v / 255 correctly rounded, the same floats the stack reader's table
+// gives, so a fit from bytes and one from floats agree to the bit.
+__attribute__((target_clones("avx2", "default"))) void bytes_to_unit(const std::uint8_t* in,
+                                                                     std::size_t count,
+                                                                     float* out) {
+  for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(in[k]) / 255.0f;
+}
+
+// luma_lrgb_row on one image's row of 8-bit RGB: the same operations in the same order on
+// the same floats (v / 255), so the same bits. The compiler leaves the interleaved form
+// scalar, and this pass over the samples is the fit's largest, so AVX2 by hand: 8 texels at
+// a time, de-interleaved with byte shuffles. Returns the texels done; the caller finishes.
+__attribute__((target("avx2"))) int luma_lrgb_u8_avx2(const std::uint8_t* s, int w, float* yi,
+                                                      float* s0, float* s1, float* s2, float* s3) {
+  const __m128i gather = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
+  const __m256 k255 = _mm256_set1_ps(255.0f);
+  const __m256 kr = _mm256_set1_ps(static_cast<float>(kLumaR));
+  const __m256 kg = _mm256_set1_ps(static_cast<float>(kLumaG));
+  const __m256 kb = _mm256_set1_ps(static_cast<float>(kLumaB));
+  int x = 0;
+  // Two 16-byte loads at 3x and 3x + 12 read up to byte 3x + 27 of the row.
+  for (; 3 * x + 28 <= 3 * w; x += 8) {
+    __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x));
+    __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x + 12));
+    a = _mm_shuffle_epi8(a, gather);              // R0-3 G0-3 B0-3 .
+    b = _mm_shuffle_epi8(b, gather);              // R4-7 G4-7 B4-7 .
+    const __m128i rg = _mm_unpacklo_epi32(a, b);  // R0-3 R4-7 G0-3 G4-7
+    const __m128i bb = _mm_unpackhi_epi32(a, b);  // B0-3 B4-7 . .
+    const __m256 r = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(rg)), k255);
+    const __m256 g =
+        _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8))), k255);
+    const __m256 bl = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bb)), k255);
+    const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
+                                   _mm256_mul_ps(kb, bl));
+    _mm256_storeu_ps(yi + x, l);
+    _mm256_storeu_ps(s0 + x, _mm256_add_ps(_mm256_loadu_ps(s0 + x), _mm256_mul_ps(l, l)));
+    _mm256_storeu_ps(s1 + x, _mm256_add_ps(_mm256_loadu_ps(s1 + x), _mm256_mul_ps(l, r)));
+    _mm256_storeu_ps(s2 + x, _mm256_add_ps(_mm256_loadu_ps(s2 + x), _mm256_mul_ps(l, g)));
+    _mm256_storeu_ps(s3 + x, _mm256_add_ps(_mm256_loadu_ps(s3 + x), _mm256_mul_ps(l, bl)));
+  }
+  return x;
+}
+
+void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float* s1, float* s2,
+                      float* s3) {
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  const int done = avx2 ? luma_lrgb_u8_avx2(s, w, yi, s0, s1, s2, s3) : 0;
+  float rgb[3 * 8];
+  for (int x = done; x < w; x += 8) {  // the rest (or all) through the float row code
+    const int m = std::min(8, w - x);
+    bytes_to_unit(s + 3 * x, static_cast<std::size_t>(3 * m), rgb);
+    luma_lrgb_row(rgb, m, yi + x, s0 + x, s1 + x, s2 + x, s3 + x);
   }
 }
 
@@ -253,8 +310,25 @@ class BandFitter {
     const int n = band.images;
     const int w = width_;
     const int ch = channels_;
-    const auto stride = static_cast<Eigen::Index>(band.image_stride());
-    const float* first = band.image(0) + static_cast<std::size_t>(r) * w * ch;
+    const std::size_t row_offset = static_cast<std::size_t>(r) * w * ch;
+    // 8-bit bands: the LRGB luma pass reads the bytes itself; everything else gets this row
+    // of every image as floats first (a small buffer that stays in cache).
+    const bool lrgb_bytes = band.is_u8 && options_.model == ColourModel::kLRGB && ch == 3 &&
+                            !st->active && options_.precision == Precision::kFloat;
+    thread_local std::vector<float> row_floats;
+    const float* first = nullptr;
+    auto stride = static_cast<Eigen::Index>(band.image_stride());
+    if (!band.is_u8) {
+      first = band.image(0) + row_offset;
+    } else if (!lrgb_bytes) {
+      const std::size_t m = static_cast<std::size_t>(w) * ch;
+      row_floats.resize(static_cast<std::size_t>(n) * m);
+      for (int i = 0; i < n; ++i) {
+        bytes_to_unit(band.image_u8(i) + row_offset, m, row_floats.data() + i * m);
+      }
+      first = row_floats.data();
+      stride = static_cast<Eigen::Index>(m);
+    }
     const SampleMap samples(first, n, static_cast<Eigen::Index>(w) * ch,
                             Eigen::OuterStride<>(stride));
 
@@ -304,8 +378,12 @@ class BandFitter {
     float* s2 = s1 + w;
     float* s3 = s2 + w;
     for (int i = 0; i < n; ++i) {
-      const float* s = samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride();
       float* yi = y_scratch.data() + static_cast<std::ptrdiff_t>(i) * w;
+      if (lrgb_bytes) {
+        luma_lrgb_row_u8(band.image_u8(i) + row_offset, w, yi, s0, s1, s2, s3);
+        continue;
+      }
+      const float* s = samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride();
       if (ch != 3) {  // grey: colour (1, 1, 1) up to scale, chroma 0
         for (int x = 0; x < w; ++x) {
           yi[x] = s[x];
@@ -364,9 +442,14 @@ class BandFitter {
     const int n = band.images;
     const int ch = channels_;
     s->resize(static_cast<std::size_t>(n) * ch);
+    const std::size_t offset = (static_cast<std::size_t>(r) * width_ + x) * ch;
     for (int i = 0; i < n; ++i) {
-      const float* p = band.image(i) + (static_cast<std::size_t>(r) * width_ + x) * ch;
-      for (int k = 0; k < ch; ++k) (*s)[static_cast<std::size_t>(i * ch + k)] = p[k];
+      for (int k = 0; k < ch; ++k) {
+        // The same float either way (v / 255 for bytes), then widened.
+        const float v = band.is_u8 ? static_cast<float>(band.image_u8(i)[offset + k]) / 255.0f
+                                   : band.image(i)[offset + k];
+        (*s)[static_cast<std::size_t>(i * ch + k)] = v;
+      }
     }
   }
 
@@ -931,7 +1014,9 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
       // Float files are not clipped at full scale (HDR): no sample is "saturated".
       run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
     }
-    const auto source = [&](int rows, StackBand* band) { return reader.read_band(rows, band); };
+    const auto source = [&](int rows, StackBand* band) {
+      return reader.read_band(rows, band, BandStorage::kNative8);
+    };
     report = run_fit(design, run_options, reader.width(), reader.height(), reader.channels(),
                      reader.info().colour_space, source, sink, setup.fit(run_options));
     setup.finish(&report);

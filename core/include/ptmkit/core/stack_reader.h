@@ -7,6 +7,7 @@
 // row-major matrix — which is what a shared-pseudo-inverse fit multiplies.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <vector>
@@ -15,21 +16,36 @@
 
 namespace ptmkit {
 
+// How a band holds its samples.
+enum class BandStorage {
+  kFloat,    // always floats, integer files scaled to 0..1 (v / 255, v / 65535)
+  kNative8,  // 8-bit files keep their bytes (a quarter of the memory traffic); others as kFloat
+};
+
 struct StackBand {
   int y0 = 0;    // first image row in this band (0 = top)
   int rows = 0;  // rows in this band
   int width = 0;
   int channels = 0;
   int images = 0;
-  std::vector<float> samples;  // images * rows * width * channels floats
+  // Which of the two buffers holds this band: bytes (8-bit files read with kNative8, value
+  // v meaning v / 255) or samples (everything else). The other one is empty.
+  bool is_u8 = false;
+  std::vector<float> samples;       // images * rows * width * channels floats
+  std::vector<std::uint8_t> bytes;  // the same layout, one byte per sample
 
   [[nodiscard]] std::size_t image_stride() const {
     return static_cast<std::size_t>(rows) * width * channels;
   }
   [[nodiscard]] const float* image(int i) const { return samples.data() + i * image_stride(); }
   [[nodiscard]] float* image(int i) { return samples.data() + i * image_stride(); }
+  [[nodiscard]] const std::uint8_t* image_u8(int i) const {
+    return bytes.data() + i * image_stride();
+  }
+  // Either storage, as a 0..1 float.
   [[nodiscard]] float sample(int i, int row, int x, int c) const {
-    return image(i)[(static_cast<std::size_t>(row) * width + x) * channels + c];
+    const std::size_t k = (static_cast<std::size_t>(row) * width + x) * channels + c;
+    return is_u8 ? static_cast<float>(image_u8(i)[k]) / 255.0f : image(i)[k];
   }
 };
 
@@ -52,7 +68,8 @@ class StackReader {
   // Decodes the next `rows` rows (fewer at the bottom) of every image into `band`, reusing its
   // storage. Returns false once every row has been read. Throws ptmkit::Error naming the file
   // on a decode failure. Rows come top to bottom; the reader cannot seek backwards.
-  bool read_band(int rows, StackBand* band);
+  // With kNative8, 8-bit files fill band->bytes instead (band->is_u8).
+  bool read_band(int rows, StackBand* band, BandStorage storage = BandStorage::kFloat);
 
  private:
   struct Impl;
