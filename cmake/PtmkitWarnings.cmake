@@ -2,7 +2,10 @@
 add_library(ptmkit_build_flags INTERFACE)
 target_compile_options(ptmkit_build_flags INTERFACE
   -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion
-  -Wnon-virtual-dtor -Wold-style-cast -Woverloaded-virtual)
+  -Wnon-virtual-dtor -Wold-style-cast -Woverloaded-virtual
+  # No implicit a * b + c -> fma: the kernels compiled for FMA must give the bits of the
+  # baseline ones (the 8-bit and float fit paths are tested to agree exactly).
+  -ffp-contract=off)
 if(PTMKIT_NATIVE)
   target_compile_options(ptmkit_build_flags INTERFACE -march=native)
 endif()

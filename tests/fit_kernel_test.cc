@@ -1,11 +1,13 @@
-// The fit's pseudo-inverse product: the run-time-chosen path (AVX2/FMA where the CPU has it)
-// gives the same bits as the portable one, and matches a double-precision product.
+// The fit's kernels: the run-time-chosen paths (AVX2/FMA where the CPU has it) give the same
+// bits as the portable ones; the product matches double precision, and 8-bit samples become
+// exactly v / 255.
+#include <cstdint>
 #include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "../fit/src/pinv_kernel.h"
+#include "../fit/src/kernels.h"
 #include "test_util.h"
 
 namespace ptmkit::fit {
@@ -38,6 +40,57 @@ TEST(PinvKernel, DispatchedAndPortablePathsGiveTheSameBitsAndMatchDouble) {
       }
       EXPECT_LT(worst, 1e-5 * n) << "n " << n << " m " << m;
     }
+  }
+}
+
+TEST(UnitBytes, EveryByteIsTheCorrectlyRoundedQuotient) {
+  // Every value, at every position of an 8-wide vector and in the scalar tail.
+  std::vector<std::uint8_t> in(256 * 8 + 5);
+  for (std::size_t k = 0; k < in.size(); ++k) in[k] = static_cast<std::uint8_t>((k * 9) % 256);
+  std::vector<float> out(in.size());
+  internal::bytes_to_unit(in.data(), in.size(), out.data());
+  for (std::size_t k = 0; k < in.size(); ++k) {
+    ASSERT_EQ(out[k], static_cast<float>(in[k]) / 255.0f) << "byte " << int{in[k]};
+  }
+}
+
+TEST(PinvKernel, BytesGiveTheBitsOfConvertingFirst) {
+  std::mt19937_64 rng(test::test_seed());
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::uniform_int_distribution<int> byte(0, 255);
+  for (const int n : {6, 49}) {
+    for (const std::ptrdiff_t m : {1, 15, 16, 17, 12003}) {
+      const std::ptrdiff_t stride = m + 3;
+      std::vector<float> p(static_cast<std::size_t>(6 * n));
+      for (float& v : p) v = u(rng);
+      std::vector<std::uint8_t> b(static_cast<std::size_t>(n * stride));
+      for (auto& v : b) v = static_cast<std::uint8_t>(byte(rng));
+      std::vector<float> f(b.size());
+      internal::bytes_to_unit(b.data(), b.size(), f.data());
+      std::vector<float> direct(static_cast<std::size_t>(6 * m)), converted(direct.size());
+      internal::apply_pinv_u8(p.data(), n, b.data(), stride, m, direct.data());
+      internal::apply_pinv(p.data(), n, f.data(), stride, m, converted.data());
+      ASSERT_EQ(direct, converted) << "n " << n << " m " << m;
+    }
+  }
+}
+
+TEST(LumaKernel, BytesGiveTheBitsOfTheFloatRow) {
+  std::mt19937_64 rng(test::test_seed());
+  std::uniform_int_distribution<int> byte(0, 255);
+  for (const int w : {1, 7, 8, 9, 10, 17, 4000}) {
+    std::vector<std::uint8_t> b(static_cast<std::size_t>(3 * w));
+    for (auto& v : b) v = static_cast<std::uint8_t>(byte(rng));
+    std::vector<float> f(b.size());
+    for (std::size_t k = 0; k < b.size(); ++k) f[k] = static_cast<float>(b[k]) / 255.0f;
+    const auto n = static_cast<std::size_t>(w);
+    std::vector<float> y1(n), y2(n), a1(4 * n, 0.25f), a2(4 * n, 0.25f);
+    for (int image = 0; image < 3; ++image) {  // the sums accumulate over images
+      internal::luma_lrgb_row(f.data(), w, y1.data(), &a1[0], &a1[n], &a1[2 * n], &a1[3 * n]);
+      internal::luma_lrgb_row_u8(b.data(), w, y2.data(), &a2[0], &a2[n], &a2[2 * n], &a2[3 * n]);
+    }
+    ASSERT_EQ(y1, y2) << "width " << w;
+    ASSERT_EQ(a1, a2) << "width " << w;
   }
 }
 

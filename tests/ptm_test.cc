@@ -544,19 +544,31 @@ TEST(PtmStream, SpilledCoefficientsGiveTheSameFile) {
   for (const ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB, ColourModel::kYCC}) {
     SCOPED_TRACE(std::string(to_string(model)));
     const CoefficientMap map = smooth_map(70, 131, model);  // more rows than one slice
-    PtmWriteOptions spill;
-    spill.spill_above_bytes = 1;
-    PtmStreamWriter in_memory(dir / "memory.ptm"), spilled(dir / "spilled.ptm", spill);
+    PtmStreamWriter in_memory(dir / "memory.ptm");
     in_memory.begin(1, 1, model, ColourSpace::kSRGB);
     EXPECT_FALSE(in_memory.spilled());
-    spilled.begin(1, 1, model, ColourSpace::kSRGB);
-    EXPECT_TRUE(spilled.spilled());
     stream_map(map, 9, in_memory);  // begins again, for the map's size
-    stream_map(map, 9, spilled);
-    EXPECT_EQ(read_ptm_file(dir / "memory.ptm").data, read_ptm_file(dir / "spilled.ptm").data);
-    EXPECT_EQ(in_memory.report().relit_mean_abs_grey, spilled.report().relit_mean_abs_grey);
-    EXPECT_EQ(in_memory.report().rms_coeff_error, spilled.report().rms_coeff_error);
-    EXPECT_THAT(test::list_files(dir.path()), ::testing::ElementsAre("memory.ptm", "spilled.ptm"));
+    const std::vector<std::uint8_t> expected = read_ptm_file(dir / "memory.ptm").data;
+    // Budgets: below one row (every row spilled); 50 rows (a 9-row band and a 64-row slice
+    // each straddle the boundary); just under the whole.
+    const std::size_t halfs_per_texel = model == ColourModel::kRGB   ? 18
+                                        : model == ColourModel::kYCC ? 8
+                                                                     : 6;
+    const std::size_t row_bytes = 70 * halfs_per_texel * 2;
+    for (const std::size_t budget : {std::size_t{1}, 50 * row_bytes + 7, 131 * row_bytes - 1}) {
+      SCOPED_TRACE("budget " + std::to_string(budget));
+      PtmWriteOptions spill;
+      spill.spill_above_bytes = budget;
+      PtmStreamWriter spilled(dir / "spilled.ptm", spill);
+      spilled.begin(70, 131, model, ColourSpace::kSRGB);
+      EXPECT_TRUE(spilled.spilled());
+      stream_map(map, 9, spilled);
+      EXPECT_EQ(expected, read_ptm_file(dir / "spilled.ptm").data);
+      EXPECT_EQ(in_memory.report().relit_mean_abs_grey, spilled.report().relit_mean_abs_grey);
+      EXPECT_EQ(in_memory.report().rms_coeff_error, spilled.report().rms_coeff_error);
+      EXPECT_THAT(test::list_files(dir.path()),
+                  ::testing::ElementsAre("memory.ptm", "spilled.ptm"));
+    }
   }
 }
 

@@ -8,8 +8,6 @@
 #include <optional>
 #include <type_traits>
 
-#include <immintrin.h>
-
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
@@ -17,7 +15,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
-#include "pinv_kernel.h"
+#include "kernels.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
@@ -36,81 +34,6 @@ double seconds_since(Clock::time_point t0) {
 using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using SampleMap = Eigen::Map<const RowMajorF, 0, Eigen::OuterStride<>>;
 using CoeffMap = Eigen::Map<Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>>;
-
-// One image's row of the luminance models: luma into yi and the per-texel sums (see fit_row).
-// Compiled for AVX2 and for the baseline, chosen at run time; element-wise float operations in
-// a fixed order, so both give the same bits.
-__attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float* s, int w,
-                                                                     float* yi, float* s0,
-                                                                     float* s1, float* s2,
-                                                                     float* s3) {
-  constexpr auto kR = static_cast<float>(kLumaR);
-  constexpr auto kG = static_cast<float>(kLumaG);
-  constexpr auto kB = static_cast<float>(kLumaB);
-  for (int x = 0; x < w; ++x) {
-    const float l = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
-    yi[x] = l;
-    s0[x] += l * l;
-    s1[x] += l * s[3 * x];
-    s2[x] += l * s[3 * x + 1];
-    s3[x] += l * s[3 * x + 2];
-  }
-}
-
-// 8-bit samples to 0..1: v / 255 correctly rounded, the same floats the stack reader's table
-// gives, so a fit from bytes and one from floats agree to the bit.
-__attribute__((target_clones("avx2", "default"))) void bytes_to_unit(const std::uint8_t* in,
-                                                                     std::size_t count,
-                                                                     float* out) {
-  for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(in[k]) / 255.0f;
-}
-
-// luma_lrgb_row on one image's row of 8-bit RGB: the same operations in the same order on
-// the same floats (v / 255), so the same bits. The compiler leaves the interleaved form
-// scalar, and this pass over the samples is the fit's largest, so AVX2 by hand: 8 texels at
-// a time, de-interleaved with byte shuffles. Returns the texels done; the caller finishes.
-__attribute__((target("avx2"))) int luma_lrgb_u8_avx2(const std::uint8_t* s, int w, float* yi,
-                                                      float* s0, float* s1, float* s2, float* s3) {
-  const __m128i gather = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
-  const __m256 k255 = _mm256_set1_ps(255.0f);
-  const __m256 kr = _mm256_set1_ps(static_cast<float>(kLumaR));
-  const __m256 kg = _mm256_set1_ps(static_cast<float>(kLumaG));
-  const __m256 kb = _mm256_set1_ps(static_cast<float>(kLumaB));
-  int x = 0;
-  // Two 16-byte loads at 3x and 3x + 12 read up to byte 3x + 27 of the row.
-  for (; 3 * x + 28 <= 3 * w; x += 8) {
-    __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x));
-    __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x + 12));
-    a = _mm_shuffle_epi8(a, gather);              // R0-3 G0-3 B0-3 .
-    b = _mm_shuffle_epi8(b, gather);              // R4-7 G4-7 B4-7 .
-    const __m128i rg = _mm_unpacklo_epi32(a, b);  // R0-3 R4-7 G0-3 G4-7
-    const __m128i bb = _mm_unpackhi_epi32(a, b);  // B0-3 B4-7 . .
-    const __m256 r = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(rg)), k255);
-    const __m256 g =
-        _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8))), k255);
-    const __m256 bl = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bb)), k255);
-    const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
-                                   _mm256_mul_ps(kb, bl));
-    _mm256_storeu_ps(yi + x, l);
-    _mm256_storeu_ps(s0 + x, _mm256_add_ps(_mm256_loadu_ps(s0 + x), _mm256_mul_ps(l, l)));
-    _mm256_storeu_ps(s1 + x, _mm256_add_ps(_mm256_loadu_ps(s1 + x), _mm256_mul_ps(l, r)));
-    _mm256_storeu_ps(s2 + x, _mm256_add_ps(_mm256_loadu_ps(s2 + x), _mm256_mul_ps(l, g)));
-    _mm256_storeu_ps(s3 + x, _mm256_add_ps(_mm256_loadu_ps(s3 + x), _mm256_mul_ps(l, bl)));
-  }
-  return x;
-}
-
-void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float* s1, float* s2,
-                      float* s3) {
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  const int done = avx2 ? luma_lrgb_u8_avx2(s, w, yi, s0, s1, s2, s3) : 0;
-  float rgb[3 * 8];
-  for (int x = done; x < w; x += 8) {  // the rest (or all) through the float row code
-    const int m = std::min(8, w - x);
-    bytes_to_unit(s + 3 * x, static_cast<std::size_t>(3 * m), rgb);
-    luma_lrgb_row(rgb, m, yi + x, s0 + x, s1 + x, s2 + x, s3 + x);
-  }
-}
 
 // The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
 __attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float* s, int w,
@@ -311,10 +234,19 @@ class BandFitter {
     const int w = width_;
     const int ch = channels_;
     const std::size_t row_offset = static_cast<std::size_t>(r) * w * ch;
-    // 8-bit bands: the LRGB luma pass reads the bytes itself; everything else gets this row
-    // of every image as floats first (a small buffer that stays in cache).
-    const bool lrgb_bytes = band.is_u8 && options_.model == ColourModel::kLRGB && ch == 3 &&
-                            !st->active && options_.precision == Precision::kFloat;
+    // 8-bit bands: the RGB product and the LRGB luma pass read the bytes themselves;
+    // everything else gets this row of every image as floats first.
+    const bool fast_bytes =
+        band.is_u8 && ch == 3 && !st->active && options_.precision == Precision::kFloat;
+    const bool lrgb_bytes = fast_bytes && options_.model == ColourModel::kLRGB;
+    if (fast_bytes && options_.model == ColourModel::kRGB) {
+      // The product reads the bytes itself (the same bits as converting them first).
+      const auto& p = design_.pseudo_inverse_f();
+      internal::apply_pinv_u8(p.data(), static_cast<int>(p.cols()), band.image_u8(0) + row_offset,
+                              static_cast<std::ptrdiff_t>(band.image_stride()),
+                              static_cast<std::ptrdiff_t>(w) * 3, c_out);
+      return;
+    }
     thread_local std::vector<float> row_floats;
     const float* first = nullptr;
     auto stride = static_cast<Eigen::Index>(band.image_stride());
@@ -324,7 +256,7 @@ class BandFitter {
       const std::size_t m = static_cast<std::size_t>(w) * ch;
       row_floats.resize(static_cast<std::size_t>(n) * m);
       for (int i = 0; i < n; ++i) {
-        bytes_to_unit(band.image_u8(i) + row_offset, m, row_floats.data() + i * m);
+        internal::bytes_to_unit(band.image_u8(i) + row_offset, m, row_floats.data() + i * m);
       }
       first = row_floats.data();
       stride = static_cast<Eigen::Index>(m);
@@ -364,60 +296,70 @@ class BandFitter {
     // image (each image's row is contiguous), makes the luma and the per-texel sums the colour
     // needs; walking texel by texel instead would stride across all N images per texel.
     const bool lrgb = options_.model == ColourModel::kLRGB;
-    // Scratch reused row after row (a fresh 0.8 MB buffer per row would be mapped and unmapped
+    const int ncol = colour_count(options_.model);
+    // In chunks of texels, so that the N luma rows written here are still in the core's
+    // cache when the product reads them back (a whole 4000-texel row of 49 images is 0.8 MB).
+    // Every texel's arithmetic is the same whatever the chunk: the same bits.
+    constexpr int kChunk = 1024;
+    // Scratch reused chunk after chunk (a fresh buffer per row would be mapped and unmapped
     // by the allocator each time, and the page faults and TLB flushes cost more than the fit).
     thread_local std::vector<float> y_scratch, sum_scratch;
-    y_scratch.resize(static_cast<std::size_t>(n) * w);
-    sum_scratch.assign(static_cast<std::size_t>(w) * 4, 0.0f);
-    const Eigen::Map<const RowMajorF> y(y_scratch.data(), n, w);
-    // Per texel, one array each (so the loop vectorises): LRGB sum Y^2, sum Y r, sum Y g,
-    // sum Y b; YCC sum w, sum w Cb, sum w Cr. Float sums of N terms below 1 keep a relative
-    // error near N * 6e-8, far below what an 8-bit colour can show.
-    float* s0 = sum_scratch.data();
-    float* s1 = s0 + w;
-    float* s2 = s1 + w;
-    float* s3 = s2 + w;
-    for (int i = 0; i < n; ++i) {
-      float* yi = y_scratch.data() + static_cast<std::ptrdiff_t>(i) * w;
-      if (lrgb_bytes) {
-        luma_lrgb_row_u8(band.image_u8(i) + row_offset, w, yi, s0, s1, s2, s3);
-        continue;
-      }
-      const float* s = samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride();
-      if (ch != 3) {  // grey: colour (1, 1, 1) up to scale, chroma 0
-        for (int x = 0; x < w; ++x) {
-          yi[x] = s[x];
-          s0[x] += s[x] * s[x];
+    for (int x0 = 0; x0 < w; x0 += kChunk) {
+      const int cw = std::min(kChunk, w - x0);
+      y_scratch.resize(static_cast<std::size_t>(n) * cw);
+      sum_scratch.assign(static_cast<std::size_t>(cw) * 4, 0.0f);
+      const Eigen::Map<const RowMajorF> y(y_scratch.data(), n, cw);
+      // Per texel, one array each (so the loop vectorises): LRGB sum Y^2, sum Y r, sum Y g,
+      // sum Y b; YCC sum w, sum w Cb, sum w Cr. Float sums of N terms below 1 keep a relative
+      // error near N * 6e-8, far below what an 8-bit colour can show.
+      float* s0 = sum_scratch.data();
+      float* s1 = s0 + cw;
+      float* s2 = s1 + cw;
+      float* s3 = s2 + cw;
+      for (int i = 0; i < n; ++i) {
+        float* yi = y_scratch.data() + static_cast<std::ptrdiff_t>(i) * cw;
+        if (lrgb_bytes) {
+          internal::luma_lrgb_row_u8(band.image_u8(i) + row_offset + 3 * x0, cw, yi, s0, s1, s2,
+                                     s3);
+          continue;
         }
-        continue;
+        const float* s =
+            samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride() + x0 * ch;
+        if (ch != 3) {  // grey: colour (1, 1, 1) up to scale, chroma 0
+          for (int x = 0; x < cw; ++x) {
+            yi[x] = s[x];
+            s0[x] += s[x] * s[x];
+          }
+          continue;
+        }
+        if (lrgb) {
+          internal::luma_lrgb_row(s, cw, yi, s0, s1, s2, s3);
+        } else {
+          luma_ycc_row(s, cw, yi, s0, s1, s2);
+        }
       }
-      if (lrgb) {
-        luma_lrgb_row(s, w, yi, s0, s1, s2, s3);
-      } else {
-        luma_ycc_row(s, w, yi, s0, s1, s2);
+      if (ch != 3) {
+        std::copy_n(s0, cw, s1);
+        std::copy_n(s0, cw, s2);
+        std::copy_n(s0, cw, s3);
+        if (!lrgb) std::fill_n(s0, 3 * static_cast<std::size_t>(cw), 0.0f);
       }
-    }
-    if (ch != 3) {
-      std::copy_n(s0, w, s1);
-      std::copy_n(s0, w, s2);
-      std::copy_n(s0, w, s3);
-      if (!lrgb) std::fill_n(s0, 3 * static_cast<std::size_t>(w), 0.0f);
-    }
-    apply(y, c_out, w);
-    for (int x = 0; x < w; ++x) {
-      float* col = col_out + x * colour_count(options_.model);
-      if (lrgb) {
-        const double yc[3] = {s1[x], s2[x], s3[x]};
-        finish_lrgb_colour(s0[x], yc, col, c_out + x * kPtmTerms);
-      } else {
-        finish_ycc_chroma(s0[x], s1[x], s2[x], col);
+      float* c_chunk = c_out + static_cast<std::ptrdiff_t>(x0) * kPtmTerms;
+      apply(y, c_chunk, cw);
+      for (int x = 0; x < cw; ++x) {
+        float* col = col_out + static_cast<std::ptrdiff_t>(x0 + x) * ncol;
+        if (lrgb) {
+          const double yc[3] = {s1[x], s2[x], s3[x]};
+          finish_lrgb_colour(s0[x], yc, col, c_chunk + x * kPtmTerms);
+        } else {
+          finish_ycc_chroma(s0[x], s1[x], s2[x], col);
+        }
       }
     }
     if (st->active) {
       const Eigen::Map<const Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>> c(c_out, kPtmTerms,
                                                                                 w);
       const RowMajorF model = a_f_ * c;  // N x W: L (LRGB, scaled) or Y (YCC)
-      const int ncol = colour_count(options_.model);
       for (int i = 0; i < n; ++i) {
         for (int x = 0; x < w; ++x) {
           const float* col = col_out + x * ncol;
@@ -814,17 +756,27 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
 
   BandFitter fitter(design, options, width, height, channels, colour_space, near);
   StatsTotal totals;
+  // Three bands in flight: band k is fitted while band k + 1 is decoded and band k - 1 is
+  // handed to the sink, so neither the decoding nor the sink (the .ptm writer converts and
+  // checks every coefficient) waits for the other on a machine with few cores.
+  struct Fitted {
+    int y0 = 0, rows = 0;
+    std::vector<float> coeffs, colour;
+    std::vector<RowStats> row_stats;
+  };
   StackBand bands[2];
-  std::vector<float> coeffs, colour;
-  std::vector<RowStats> row_stats;
+  Fitted fitted[2];
   sink.begin(width, height, options.model, colour_space);
 
   auto td = Clock::now();
   bool have = next_band(options.band_rows, &bands[0]);
   report.decode_seconds += seconds_since(td);
   int cur = 0;
+  const Fitted* pending = nullptr;  // fitted, not yet given to the sink
+  const auto deliver = [&](const Fitted& f) {
+    sink.write_rows(f.y0, f.rows, f.coeffs.data(), f.colour.data());
+  };
   while (have) {
-    // Decode the next band while this one is fitted.
     bool have_next = false;
     double decode_s = 0.0;
     tbb::task_group group;
@@ -833,26 +785,35 @@ FitReport run_fit(const LightDesign& design, const FitOptions& options, int widt
       have_next = next_band(options.band_rows, &bands[1 - cur]);
       decode_s = seconds_since(t);
     });
+    if (pending) group.run([&deliver, pending] { deliver(*pending); });
+    Fitted& out = fitted[cur];
     const auto tf = Clock::now();
     try {
-      fitter.fit(bands[cur], &coeffs, &colour, &row_stats);
+      out.y0 = bands[cur].y0;
+      out.rows = bands[cur].rows;
+      fitter.fit(bands[cur], &out.coeffs, &out.colour, &out.row_stats);
     } catch (...) {
       group.wait();
       throw;
     }
     report.fit_seconds += seconds_since(tf);
-    group.wait();  // rethrows a decode error
+    group.wait();  // rethrows a decode or sink error
     report.decode_seconds += decode_s;
-    for (const auto& rs : row_stats) {
+    // Merged in band order: the totals are the same whatever the threads.
+    for (const auto& rs : out.row_stats) {
       if (rs.active) totals.merge(rs);
       totals.merge_outliers(rs);
     }
-    sink.write_rows(bands[cur].y0, bands[cur].rows, coeffs.data(), colour.data());
-    if (options.progress) {
-      options.progress(static_cast<double>(bands[cur].y0 + bands[cur].rows) / height);
+    if (pending && options.progress) {
+      options.progress(static_cast<double>(pending->y0 + pending->rows) / height);
     }
+    pending = &out;
     cur = 1 - cur;
     have = have_next;
+  }
+  if (pending) {
+    deliver(*pending);
+    if (options.progress) options.progress(1.0);
   }
   // The caller ends the sink once the images are closed and the bands freed: the sink may
   // need memory of its own to finish (the .ptm writer encodes the whole file then).

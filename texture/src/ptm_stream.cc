@@ -2,16 +2,20 @@
 // encodes and writes the file in slices of rows.
 #include <fcntl.h>
 #include <immintrin.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <Eigen/Core>
 
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
 #include <string>
 
 #include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
 
 #include "ptm_internal.h"
 #include "ptmkit/core/atomic_file.h"
@@ -86,6 +90,53 @@ struct Fd {
   }
 };
 
+// A whole image's worth of bytes (the half floats, LRGB's colours) in anonymous memory: the
+// kernel's zero pages, first touched by the band that fills them, while the next band
+// decodes, instead of an up-front fill on one thread. (Transparent huge pages were tried:
+// fewer faults, but clearing 2 MiB pages cost more CPU than the faults saved.)
+template <class T>
+class LargeBuffer {
+ public:
+  LargeBuffer() = default;
+  LargeBuffer(const LargeBuffer&) = delete;
+  LargeBuffer& operator=(const LargeBuffer&) = delete;
+  LargeBuffer(LargeBuffer&& o) noexcept { swap(o); }
+  LargeBuffer& operator=(LargeBuffer&& o) noexcept {
+    swap(o);
+    return *this;
+  }
+  ~LargeBuffer() { release(); }
+
+  // n zeroed elements; throws std::bad_alloc when the memory is not there.
+  void allocate(std::size_t n) {
+    release();
+    if (n == 0) return;
+    void* p =
+        ::mmap(nullptr, n * sizeof(T), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    data_ = static_cast<T*>(p);
+    size_ = n;
+  }
+  [[nodiscard]] T* data() { return data_; }
+  [[nodiscard]] const T* data() const { return data_; }
+  [[nodiscard]] std::size_t size() const { return size_; }
+  T& operator[](std::size_t k) { return data_[k]; }
+  const T& operator[](std::size_t k) const { return data_[k]; }
+
+ private:
+  void swap(LargeBuffer& o) noexcept {
+    std::swap(data_, o.data_);
+    std::swap(size_, o.size_);
+  }
+  void release() {
+    if (data_ != nullptr) ::munmap(data_, size_ * sizeof(T));
+    data_ = nullptr;
+    size_ = 0;
+  }
+  T* data_ = nullptr;
+  std::size_t size_ = 0;
+};
+
 void pwrite_all(int fd, const void* data, std::size_t bytes, std::size_t offset,
                 const std::filesystem::path& what) {
   const auto* p = static_cast<const char*>(data);
@@ -124,9 +175,13 @@ struct PtmStreamWriter::Impl {
   PtmFormat format = PtmFormat::kRGB;
   // Halfs per texel: 18 (kRGB), 8 (kYCC: a0..a4 shared, then a5 of R, G, B), 6 (kLRGB).
   int halfs_per_texel = 18;
-  std::vector<std::uint16_t> halfs;  // in memory, unless spilled
-  Fd spill;                          // unnamed temporary file holding the halfs
-  std::vector<std::uint8_t> rgb;     // kLRGB only
+  // Rows 0 .. memory_rows - 1 of half floats are held in memory; the rest (when the whole
+  // would exceed PtmWriteOptions::spill_above_bytes) in an unnamed temporary file, row y at
+  // (y - memory_rows) row_halfs() halfs.
+  int memory_rows = 0;
+  LargeBuffer<std::uint16_t> halfs;
+  Fd spill;
+  LargeBuffer<std::uint8_t> rgb;  // kLRGB only
   std::array<float, kPtmTerms> lo{}, hi{};
   bool finite = true;
   bool begun = false;
@@ -270,10 +325,16 @@ void PtmStreamWriter::begin(int width, int height, ColourModel model, ColourSpac
     }
     ::unlink(temp.c_str());
     s.spill = std::move(fd);
+    // As many whole rows as the budget allows stay in memory: only the excess round-trips
+    // through the file.
+    const std::size_t row_bytes = s.row_halfs() * sizeof(std::uint16_t);
+    s.memory_rows = static_cast<int>(std::min<std::size_t>(options_.spill_above_bytes / row_bytes,
+                                                           static_cast<std::size_t>(height)));
   } else {
-    s.halfs.assign(texels * s.halfs_per_texel, 0);
+    s.memory_rows = height;
   }
-  if (model == ColourModel::kLRGB) s.rgb.assign(texels * 3, 0);
+  s.halfs.allocate(static_cast<std::size_t>(s.memory_rows) * s.row_halfs());
+  if (model == ColourModel::kLRGB) s.rgb.allocate(texels * 3);
   s.sample_stride = internal::relit_sample_stride(texels, options_);
   if (s.sample_stride > 0) {
     const std::size_t samples = (texels + s.sample_stride - 1) / s.sample_stride;
@@ -293,12 +354,14 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
   const std::size_t band_texels = static_cast<std::size_t>(rows) * s.width;
   const std::size_t first = static_cast<std::size_t>(y0) * s.width;
   const std::size_t hpt = static_cast<std::size_t>(s.halfs_per_texel);
+  // Straight into memory when the whole band lives there, else via a scratch band.
+  const bool in_memory = y0 + rows <= s.memory_rows;
   std::uint16_t* dst = nullptr;
-  if (s.spill.fd >= 0) {
+  if (in_memory) {
+    dst = s.halfs.data() + first * hpt;
+  } else {
     s.band_halfs.resize(band_texels * hpt);
     dst = s.band_halfs.data();
-  } else {
-    dst = s.halfs.data() + first * hpt;
   }
   // The values whose range sets the quantisation: the file polynomials as floats, before
   // rounding to half (so the scales and biases are exactly write_ptm's).
@@ -351,9 +414,14 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
       if (s.model == ColourModel::kLRGB) std::copy_n(&s.rgb[t * 3], 3, &s.sample_rgb[k * 3]);
     }
   }
-  if (s.spill.fd >= 0) {
-    pwrite_all(s.spill.fd, dst, band_texels * hpt * sizeof(std::uint16_t),
-               first * hpt * sizeof(std::uint16_t), path_);
+  if (!in_memory) {
+    const int kept = std::max(0, s.memory_rows - y0);  // leading rows that live in memory
+    const std::size_t kept_halfs = static_cast<std::size_t>(kept) * s.row_halfs();
+    if (kept > 0) std::copy_n(dst, kept_halfs, s.halfs.data() + first * hpt);
+    const std::size_t spilled_row = static_cast<std::size_t>(y0 + kept - s.memory_rows);
+    pwrite_all(s.spill.fd, dst + kept_halfs,
+               (band_texels * hpt - kept_halfs) * sizeof(std::uint16_t),
+               spilled_row * s.row_halfs() * sizeof(std::uint16_t), path_);
   }
   s.next_row = y0 + rows;
 }
@@ -416,66 +484,124 @@ void PtmStreamWriter::end() {
     if (s.model == ColourModel::kYCC) return i < kPtmTerms - 1 ? i : kPtmTerms - 1 + p;
     return p * kPtmTerms + i;
   };
+  std::array<int, 3 * kPtmTerms> half_at{};  // plane p's term i: half_at[p * 6 + i]
+  for (int p = 0; p < np; ++p) {
+    for (int i = 0; i < kPtmTerms; ++i) half_at[p * kPtmTerms + i] = half_index(p, i);
+  }
   AtomicOutput out(path_);
   {
     Fd fd(::open(out.temp_path().c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
     if (fd.fd < 0) throw Error(where(path_) + ": cannot open for writing");
     pwrite_all(fd.fd, header.data(), header.size(), 0, path_);
     const std::size_t data0 = header.size();
-    std::vector<std::uint16_t> slice_halfs;
-    std::vector<std::uint8_t> slice_bytes;
-    // Slices of kSliceRows stored rows; stored row j is image row height - 1 - j (bottom-up).
-    for (int j0 = 0; j0 < s.height; j0 += kSliceRows) {
-      const int nrows = std::min(kSliceRows, s.height - j0);
+    // Slices of kSliceRows stored rows, through a pipeline: slices read their half floats
+    // (from the spill file, if any) and are encoded in parallel, and are written in order by
+    // one thread at a time (writes to one file serialise in the kernel anyway; two threads
+    // writing at once only spin on its lock). Stored row j is image row height - 1 - j
+    // (bottom-up).
+    const int slices = (s.height + kSliceRows - 1) / kSliceRows;
+    struct Slice {
+      int j0 = 0, nrows = 0;
+      std::vector<std::uint16_t> halfs;
+      std::vector<std::uint8_t> bytes, rgb;
+    };
+    constexpr int kTokens = 4;
+    std::array<Slice, kTokens> pool;
+    int next_slice = 0;
+    const auto read_slice = [&](tbb::flow_control& fc) -> Slice* {
+      if (next_slice == slices) {
+        fc.stop();
+        return nullptr;
+      }
+      // At most kTokens slices are in flight and they finish in order: slot reuse is safe.
+      Slice* slice = &pool[static_cast<std::size_t>(next_slice % kTokens)];
+      slice->j0 = next_slice * kSliceRows;
+      slice->nrows = std::min(kSliceRows, s.height - slice->j0);
+      ++next_slice;
+      return slice;
+    };
+    const auto encode_slice = [&](Slice* slice) -> Slice* {
+      Slice& buf = *slice;
+      const int j0 = buf.j0;
+      const int nrows = buf.nrows;
       const int y_top = s.height - j0 - nrows;  // image rows y_top .. y_top + nrows - 1
       const std::uint16_t* halfs = nullptr;
-      if (s.spill.fd >= 0) {
-        slice_halfs.resize(static_cast<std::size_t>(nrows) * w * hpt);
-        pread_all(s.spill.fd, slice_halfs.data(), slice_halfs.size() * sizeof(std::uint16_t),
-                  static_cast<std::size_t>(y_top) * w * hpt * sizeof(std::uint16_t), path_);
-        halfs = slice_halfs.data();
+      const std::size_t row_halfs = s.row_halfs();
+      if (y_top + nrows <= s.memory_rows) {
+        halfs = s.halfs.data() + static_cast<std::size_t>(y_top) * row_halfs;
       } else {
-        halfs = s.halfs.data() + static_cast<std::size_t>(y_top) * w * hpt;
+        buf.halfs.resize(static_cast<std::size_t>(nrows) * row_halfs);
+        const int kept = std::clamp(s.memory_rows - y_top, 0, nrows);
+        if (kept > 0) {
+          std::copy_n(s.halfs.data() + static_cast<std::size_t>(y_top) * row_halfs,
+                      static_cast<std::size_t>(kept) * row_halfs, buf.halfs.data());
+        }
+        pread_all(s.spill.fd, buf.halfs.data() + static_cast<std::size_t>(kept) * row_halfs,
+                  static_cast<std::size_t>(nrows - kept) * row_halfs * sizeof(std::uint16_t),
+                  static_cast<std::size_t>(y_top + kept - s.memory_rows) * row_halfs *
+                      sizeof(std::uint16_t),
+                  path_);
+        halfs = buf.halfs.data();
       }
       const std::size_t plane_bytes = static_cast<std::size_t>(nrows) * w * kPtmTerms;
-      slice_bytes.resize(plane_bytes * np);
-      tbb::parallel_for(0, nrows, [&](int jr) {
+      buf.bytes.resize(plane_bytes * np);
+      std::uint32_t* count = counts.local().data();
+      for (int jr = 0; jr < nrows; ++jr) {
         const int y = s.height - 1 - (j0 + jr);
         const std::uint16_t* h = halfs + static_cast<std::size_t>(y - y_top) * w * hpt;
-        std::uint32_t* count = counts.local().data();
-        for (int p = 0; p < np; ++p) {
-          std::uint8_t* b =
-              slice_bytes.data() + p * plane_bytes + static_cast<std::size_t>(jr) * w * kPtmTerms;
-          for (int i = 0; i < kPtmTerms; ++i) {
-            const std::uint8_t* lut = byte_of.data() + i * kHalves;
-            std::uint32_t* cnt = count + i * kHalves;
-            const std::uint16_t* src = h + half_index(p, i);
-            for (std::size_t x = 0; x < w; ++x) {
-              const std::uint16_t v = src[x * hpt];
-              b[x * kPtmTerms + i] = lut[v];
-              ++cnt[v];
+        std::uint8_t* b = buf.bytes.data() + static_cast<std::size_t>(jr) * w * kPtmTerms;
+        // Texel by texel, each of its coefficients in turn: the halfs are read in order, and
+        // a run of equal values (smooth regions) does not chain one count update to the next.
+        const auto encode = [&](auto planes) {
+          constexpr int kPlanes = decltype(planes)::value;
+          for (std::size_t x = 0; x < w; ++x) {
+            const std::uint16_t* hx = h + x * hpt;
+            for (int p = 0; p < kPlanes; ++p) {
+              std::uint8_t* bx = b + p * plane_bytes + x * kPtmTerms;
+              for (int i = 0; i < kPtmTerms; ++i) {
+                const std::uint16_t v = hx[half_at[p * kPtmTerms + i]];
+                bx[i] = byte_of[i * kHalves + v];
+                ++count[i * kHalves + v];
+              }
             }
           }
+        };
+        if (np == 3) {
+          encode(std::integral_constant<int, 3>{});
+        } else {
+          encode(std::integral_constant<int, 1>{});
         }
-      });
-      for (int p = 0; p < np; ++p) {
-        const std::size_t at =
-            data0 +
-            (static_cast<std::size_t>(p) * texels + static_cast<std::size_t>(j0) * w) * kPtmTerms;
-        pwrite_all(fd.fd, slice_bytes.data() + p * plane_bytes, plane_bytes, at, path_);
       }
       if (s.format == PtmFormat::kLRGB) {
         // The colour block follows the coefficients, in the same bottom-up row order.
-        std::vector<std::uint8_t> rgb(static_cast<std::size_t>(nrows) * w * 3);
+        buf.rgb.resize(static_cast<std::size_t>(nrows) * w * 3);
         for (int jr = 0; jr < nrows; ++jr) {
           const int y = s.height - 1 - (j0 + jr);
           std::copy_n(s.rgb.data() + static_cast<std::size_t>(y) * w * 3, w * 3,
-                      rgb.data() + static_cast<std::size_t>(jr) * w * 3);
+                      buf.rgb.data() + static_cast<std::size_t>(jr) * w * 3);
         }
-        pwrite_all(fd.fd, rgb.data(), rgb.size(),
-                   data0 + texels * kPtmTerms + static_cast<std::size_t>(j0) * w * 3, path_);
       }
-    }
+      return slice;
+    };
+    const auto write_slice = [&](Slice* slice) {
+      const Slice& buf = *slice;
+      const std::size_t plane_bytes = static_cast<std::size_t>(buf.nrows) * w * kPtmTerms;
+      for (int p = 0; p < np; ++p) {
+        const std::size_t at =
+            data0 + (static_cast<std::size_t>(p) * texels + static_cast<std::size_t>(buf.j0) * w) *
+                        kPtmTerms;
+        pwrite_all(fd.fd, buf.bytes.data() + p * plane_bytes, plane_bytes, at, path_);
+      }
+      if (s.format == PtmFormat::kLRGB) {
+        pwrite_all(fd.fd, buf.rgb.data(), buf.rgb.size(),
+                   data0 + texels * kPtmTerms + static_cast<std::size_t>(buf.j0) * w * 3, path_);
+      }
+    };
+    tbb::parallel_pipeline(
+        kTokens,
+        tbb::make_filter<void, Slice*>(tbb::filter_mode::serial_in_order, read_slice) &
+            tbb::make_filter<Slice*, Slice*>(tbb::filter_mode::parallel, encode_slice) &
+            tbb::make_filter<Slice*, void>(tbb::filter_mode::serial_in_order, write_slice));
     if (::close(fd.fd) != 0) {
       fd.fd = -1;
       throw Error(where(path_) + ": write failed: " + std::strerror(errno));

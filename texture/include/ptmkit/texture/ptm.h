@@ -142,12 +142,13 @@ struct PtmWriteOptions {
   // samples, plenty for the mean and PSNR (the max is the max over them). At 2^18 it cost a
   // third of a least-squares fit of a 320 x 320 capture. 0 skips the relit error.
   std::size_t report_max_texels = std::size_t{1} << 16;
-  // PtmStreamWriter only: when its half-float coefficients would take more than this many
-  // bytes, they go to an unnamed temporary file in the output's folder instead of memory
-  // (a 12-megapixel kRGB fit: 432 MB of coefficients, read back once by end()). The page
-  // cache still serves them when memory is free; the process's own footprint stays small.
-  // 0: always in memory.
-  std::size_t spill_above_bytes = std::size_t{256} << 20;
+  // PtmStreamWriter only: at most this many bytes of its half-float coefficients stay in
+  // memory (whole rows, from the top); the rows beyond go to an unnamed temporary file in the
+  // output's folder (a 12-megapixel kRGB fit: 432 MB of coefficients, 240 MB of them spilled,
+  // read back once by end()). The page cache still serves them when memory is free; the
+  // process's own footprint stays bounded. Spilling only the excess rather than everything
+  // saved 0.4 s of a 2.4 s fit (docs/PERFORMANCE.md). 0: always in memory.
+  std::size_t spill_above_bytes = std::size_t{192} << 20;
 };
 
 // What quantisation cost.
@@ -211,7 +212,7 @@ struct PtmSummary {
 // boundary: each byte then differs by one step, so a relit value differs by at most
 // sum_i scale_i * |basis_i| / 255 and in practice by less than one grey level (tested).
 // The report compares the written file with the half values. The file is encoded and written
-// in slices of rows, so end() needs no buffer of the file's size; above
+// in slices of rows, so end() needs no buffer of the file's size; beyond
 // PtmWriteOptions::spill_above_bytes the half floats themselves live in a temporary file.
 class PtmStreamWriter final : public CoefficientSink {
  public:
@@ -231,7 +232,7 @@ class PtmStreamWriter final : public CoefficientSink {
   // Bytes of half-float coefficients and colour bytes held until end(), in memory or (see
   // spilled()) in the temporary file.
   [[nodiscard]] std::size_t buffer_bytes() const;
-  // Whether begin() put the coefficients in a temporary file (see spill_above_bytes).
+  // Whether begin() put some of the coefficients in a temporary file (see spill_above_bytes).
   [[nodiscard]] bool spilled() const;
 
   struct Impl;  // storage, defined in the implementation

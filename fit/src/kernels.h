@@ -1,0 +1,41 @@
+// The fit's inner loops: the 6 x N pseudo-inverse applied to a band's N x M samples, 8-bit
+// samples to floats, and the LRGB luminance pass.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace ptmkit::fit::internal {
+
+// out (6 x m, column-major: texel-channel j's coefficients at out[6 j .. 6 j + 5]) =
+// p (6 x n, column-major) * s (n x m; row i starts at s + i * stride).
+//
+// Every output is the sum over i = 0..n-1, in that order, of fused multiply-adds in float, so
+// the result is the same bits on every machine and thread count: AVX2 with FMA where the CPU
+// has them (chosen at run time), else the same sequence with std::fma.
+void apply_pinv(const float* p, int n, const float* s, std::ptrdiff_t stride, std::ptrdiff_t m,
+                float* out);
+
+// apply_pinv on 8-bit samples s (row i starts at s + i * stride bytes), each taken as
+// v / 255 exactly as bytes_to_unit converts it: the same bits as converting, then apply_pinv.
+void apply_pinv_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
+                   std::ptrdiff_t m, float* out);
+
+// The portable path alone (for tests: it must give the same bits as the dispatched one).
+void apply_pinv_portable(const float* p, int n, const float* s, std::ptrdiff_t stride,
+                         std::ptrdiff_t m, float* out);
+
+// 8-bit samples to 0..1: out[k] = in[k] / 255.0f correctly rounded, the same floats the
+// stack reader's table gives, so a fit from bytes and one from floats agree to the bit.
+void bytes_to_unit(const std::uint8_t* in, std::size_t count, float* out);
+
+// One image's row of w RGB texels for the luminance models: luma (Rec. 601 weights) into yi,
+// and the per-texel sums s0 += l * l, s1 += l * r, s2 += l * g, s3 += l * b that give LRGB's
+// colour. Float operations in a fixed order: the same bits on every dispatch path.
+void luma_lrgb_row(const float* s, int w, float* yi, float* s0, float* s1, float* s2, float* s3);
+
+// luma_lrgb_row on 8-bit samples (converted as bytes_to_unit does): the same bits.
+void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float* s1, float* s2,
+                      float* s3);
+
+}  // namespace ptmkit::fit::internal
