@@ -1,6 +1,8 @@
 // The fit's kernels: the run-time-chosen paths (AVX2/FMA where the CPU has it) give the same
 // bits as the portable ones; the product matches double precision, and 8-bit samples become
 // exactly v / 255.
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <random>
 #include <vector>
@@ -92,6 +94,47 @@ TEST(LumaKernel, BytesGiveTheBitsOfTheFloatRow) {
     ASSERT_EQ(y1, y2) << "width " << w;
     ASSERT_EQ(a1, a2) << "width " << w;
   }
+}
+
+// The median by counting must be the exact median: both middle values for an even count,
+// ties (many equal residuals, as clipped samples give), every size up to and past the
+// counting limit of 64.
+TEST(MedianKernel, CountingGivesTheExactMedianAndRank) {
+  std::mt19937_64 rng(test::test_seed());
+  std::normal_distribution<double> noise(0.0, 0.01);
+  const auto reference = [](std::vector<double> v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    if (v.size() % 2 == 1) return *mid;
+    return 0.5 * (*std::max_element(v.begin(), mid) + *mid);
+  };
+  for (int n = 1; n <= 80; ++n) {
+    for (int trial = 0; trial < 40; ++trial) {
+      std::vector<double> v(static_cast<std::size_t>(n));
+      for (double& x : v) x = noise(rng);
+      if (trial % 4 == 1) {  // a block of ties at the middle
+        for (int i = 0; i < n / 2 + 1; ++i) v[static_cast<std::size_t>(i)] = 0.0;
+      }
+      if (trial % 4 == 2) {  // a few distinct values only
+        for (double& x : v) x = std::round(x * 100.0);
+      }
+      const double want = reference(v);
+      std::vector<double> room(v);
+      room.resize(static_cast<std::size_t>((n + 7) & ~7));
+      ASSERT_EQ(internal::median_padded(room.data(), n), want) << "n " << n << " trial " << trial;
+      std::vector<double> plain(v);
+      ASSERT_EQ(internal::median_padded_portable(plain.data(), n), want) << "n " << n;
+      const int k = static_cast<int>(rng() % static_cast<std::uint64_t>(n));  // any rank
+      std::vector<double> sorted(v);
+      std::sort(sorted.begin(), sorted.end());
+      room.assign(v.begin(), v.end());
+      room.resize(static_cast<std::size_t>((n + 7) & ~7));
+      ASSERT_EQ(internal::select_padded(room.data(), n, k), sorted[static_cast<std::size_t>(k)])
+          << "n " << n << " k " << k;
+    }
+  }
+  std::vector<double> one_nan = {0.1, std::nan(""), 0.3, 0.2, 0, 0, 0, 0};
+  EXPECT_NO_FATAL_FAILURE(internal::median_padded(one_nan.data(), 4));
 }
 
 }  // namespace

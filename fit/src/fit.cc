@@ -35,23 +35,6 @@ using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::Ro
 using SampleMap = Eigen::Map<const RowMajorF, 0, Eigen::OuterStride<>>;
 using CoeffMap = Eigen::Map<Eigen::Matrix<float, kPtmTerms, Eigen::Dynamic>>;
 
-// The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
-__attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float* s, int w,
-                                                                    float* yi, float* s0, float* s1,
-                                                                    float* s2) {
-  constexpr auto kR = static_cast<float>(kLumaR);
-  constexpr auto kG = static_cast<float>(kLumaG);
-  constexpr auto kB = static_cast<float>(kLumaB);
-  for (int x = 0; x < w; ++x) {
-    const float l = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
-    yi[x] = l;
-    const float wgt = std::max(0.0f, l);
-    s0[x] += wgt;
-    s1[x] += wgt * (s[3 * x + 2] - l) * static_cast<float>(1.0 / 1.772);
-    s2[x] += wgt * (s[3 * x] - l) * static_cast<float>(1.0 / 1.402);
-  }
-}
-
 // Histogram of |residual| in grey levels: 0.05-grey bins up to 256, one overflow bin.
 constexpr double kHistBinGrey = 0.05;
 constexpr int kHistBins = 5121;
@@ -335,7 +318,7 @@ class BandFitter {
         if (lrgb) {
           internal::luma_lrgb_row(s, cw, yi, s0, s1, s2, s3);
         } else {
-          luma_ycc_row(s, cw, yi, s0, s1, s2);
+          internal::luma_ycc_row(s, cw, yi, s0, s1, s2);
         }
       }
       if (ch != 3) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "ptmkit/core/colour.h"
@@ -16,6 +17,10 @@ namespace ptmkit::fit::internal {
 namespace {
 
 constexpr int kTerms = 6;
+// Rec. 601 luma weights in float, for every luminance kernel below.
+constexpr auto kLumaRf = static_cast<float>(kLumaR);
+constexpr auto kLumaGf = static_cast<float>(kLumaG);
+constexpr auto kLumaBf = static_cast<float>(kLumaB);
 constexpr std::ptrdiff_t kBlock = 16;   // columns per register block (two 8-float vectors)
 constexpr std::ptrdiff_t kAhead = 512;  // software prefetch distance in bytes (8-bit samples)
 
@@ -51,6 +56,29 @@ void block_portable_u8(const float* p, int n, const std::uint8_t* s, std::ptrdif
 }
 
 #ifdef PTMKIT_PINV_X86
+// One sample row's contribution to a 16-column block: acc[k] += pi[k] * x for the 6 terms.
+__attribute__((target("avx2,fma"))) inline void accumulate(const float* pi, __m256 x0, __m256 x1,
+                                                           __m256* a0, __m256* a1) {
+  for (int k = 0; k < kTerms; ++k) {
+    const __m256 c = _mm256_broadcast_ss(pi + k);
+    a0[k] = _mm256_fmadd_ps(c, x0, a0[k]);
+    a1[k] = _mm256_fmadd_ps(c, x1, a1[k]);
+  }
+}
+
+// The block's sums, term-major in registers, stored texel-major: out[6 t + k].
+__attribute__((target("avx2,fma"))) inline void store_block(const __m256* a0, const __m256* a1,
+                                                            float* out) {
+  alignas(32) float tmp[kTerms][kBlock];
+  for (int k = 0; k < kTerms; ++k) {
+    _mm256_store_ps(tmp[k], a0[k]);
+    _mm256_store_ps(tmp[k] + 8, a1[k]);
+  }
+  for (std::ptrdiff_t t = 0; t < kBlock; ++t) {
+    for (int k = 0; k < kTerms; ++k) out[t * kTerms + k] = tmp[k][t];
+  }
+}
+
 __attribute__((target("avx2,fma"))) void apply_avx2(const float* p, int n, const float* s,
                                                     std::ptrdiff_t stride, std::ptrdiff_t m,
                                                     float* out) {
@@ -62,21 +90,9 @@ __attribute__((target("avx2,fma"))) void apply_avx2(const float* p, int n, const
       const float* row = s + static_cast<std::ptrdiff_t>(i) * stride + j;
       const __m256 x0 = _mm256_loadu_ps(row);
       const __m256 x1 = _mm256_loadu_ps(row + 8);
-      const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
-      for (int k = 0; k < kTerms; ++k) {
-        const __m256 b = _mm256_broadcast_ss(pi + k);
-        a0[k] = _mm256_fmadd_ps(b, x0, a0[k]);
-        a1[k] = _mm256_fmadd_ps(b, x1, a1[k]);
-      }
+      accumulate(p + static_cast<std::ptrdiff_t>(i) * kTerms, x0, x1, a0, a1);
     }
-    alignas(32) float tmp[kTerms][kBlock];
-    for (int k = 0; k < kTerms; ++k) {
-      _mm256_store_ps(tmp[k], a0[k]);
-      _mm256_store_ps(tmp[k] + 8, a1[k]);
-    }
-    for (std::ptrdiff_t t = 0; t < kBlock; ++t) {
-      for (int k = 0; k < kTerms; ++k) out[(j + t) * kTerms + k] = tmp[k][t];
-    }
+    store_block(a0, a1, out + j * kTerms);
   }
   if (j < m) block_portable(p, n, s, stride, j, m - j, out);
 }
@@ -112,21 +128,9 @@ __attribute__((target("avx2,fma"))) void apply_avx2_u8(const float* p, int n, co
       const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row));
       const __m256 x0 = unit8_fma(_mm256_cvtepu8_epi32(b));
       const __m256 x1 = unit8_fma(_mm256_cvtepu8_epi32(_mm_srli_si128(b, 8)));
-      const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
-      for (int k = 0; k < kTerms; ++k) {
-        const __m256 c = _mm256_broadcast_ss(pi + k);
-        a0[k] = _mm256_fmadd_ps(c, x0, a0[k]);
-        a1[k] = _mm256_fmadd_ps(c, x1, a1[k]);
-      }
+      accumulate(p + static_cast<std::ptrdiff_t>(i) * kTerms, x0, x1, a0, a1);
     }
-    alignas(32) float tmp[kTerms][kBlock];
-    for (int k = 0; k < kTerms; ++k) {
-      _mm256_store_ps(tmp[k], a0[k]);
-      _mm256_store_ps(tmp[k] + 8, a1[k]);
-    }
-    for (std::ptrdiff_t t = 0; t < kBlock; ++t) {
-      for (int k = 0; k < kTerms; ++k) out[(j + t) * kTerms + k] = tmp[k][t];
-    }
+    store_block(a0, a1, out + j * kTerms);
   }
   if (j < m) block_portable_u8(p, n, s, stride, j, m - j, out);
 }
@@ -192,9 +196,9 @@ __attribute__((target("avx2,fma"))) int luma_lrgb_u8_avx2(const std::uint8_t* s,
                                                           float* s0, float* s1, float* s2,
                                                           float* s3) {
   const __m128i gather = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
-  const __m256 kr = _mm256_set1_ps(static_cast<float>(kLumaR));
-  const __m256 kg = _mm256_set1_ps(static_cast<float>(kLumaG));
-  const __m256 kb = _mm256_set1_ps(static_cast<float>(kLumaB));
+  const __m256 kr = _mm256_set1_ps(kLumaRf);
+  const __m256 kg = _mm256_set1_ps(kLumaGf);
+  const __m256 kb = _mm256_set1_ps(kLumaBf);
   int x = 0;
   // Two 16-byte loads at 3x and 3x + 12 read up to byte 3x + 27 of the row.
   for (; 3 * x + 28 <= 3 * w; x += 8) {
@@ -238,16 +242,27 @@ __attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float
                                                                      float* yi, float* s0,
                                                                      float* s1, float* s2,
                                                                      float* s3) {
-  constexpr auto kR = static_cast<float>(kLumaR);
-  constexpr auto kG = static_cast<float>(kLumaG);
-  constexpr auto kB = static_cast<float>(kLumaB);
   for (int x = 0; x < w; ++x) {
-    const float l = kR * s[3 * x] + kG * s[3 * x + 1] + kB * s[3 * x + 2];
+    const float l = kLumaRf * s[3 * x] + kLumaGf * s[3 * x + 1] + kLumaBf * s[3 * x + 2];
     yi[x] = l;
     s0[x] += l * l;
     s1[x] += l * s[3 * x];
     s2[x] += l * s[3 * x + 1];
     s3[x] += l * s[3 * x + 2];
+  }
+}
+
+// The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
+__attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float* s, int w,
+                                                                    float* yi, float* s0, float* s1,
+                                                                    float* s2) {
+  for (int x = 0; x < w; ++x) {
+    const float l = kLumaRf * s[3 * x] + kLumaGf * s[3 * x + 1] + kLumaBf * s[3 * x + 2];
+    yi[x] = l;
+    const float wgt = std::max(0.0f, l);
+    s0[x] += wgt;
+    s1[x] += wgt * (s[3 * x + 2] - l) * static_cast<float>(1.0 / 1.772);
+    s2[x] += wgt * (s[3 * x] - l) * static_cast<float>(1.0 / 1.402);
   }
 }
 
@@ -263,6 +278,110 @@ void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float*
     bytes_to_unit(s + 3 * x, static_cast<std::size_t>(3 * m), rgb);
     luma_lrgb_row(rgb, m, yi + x, s0 + x, s1 + x, s2 + x, s3 + x);
   }
+}
+
+// ---- exact medians of small sets ----
+
+namespace {
+
+// The k-th smallest (0-based) of x[0..n) is the largest value with at most k values below
+// it, and the (k - 1)-th comes from the same counts: *lo and *hi get the (k - 1)-th and k-th
+// smallest. A NaN anywhere makes the counts meaningless: returns false.
+bool rank_pair_portable(const double* x, int n, int k, double* lo, double* hi) {
+  *lo = *hi = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < n; ++i) {
+    const double v = x[i];
+    if (std::isnan(v)) return false;
+    int less = 0;
+    for (int j = 0; j < n; ++j) less += x[j] < v ? 1 : 0;
+    if (less <= k) *hi = std::max(*hi, v);
+    if (less <= k - 1) *lo = std::max(*lo, v);
+  }
+  return true;
+}
+
+#ifdef PTMKIT_PINV_X86
+// v where its count of values below is at most limit, else -inf.
+__attribute__((target("avx2"))) inline __m256d at_most(__m256d v, __m256i below, __m256i limit) {
+  const __m256d none = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+  return _mm256_blendv_pd(v, none, _mm256_castsi256_pd(_mm256_cmpgt_epi64(below, limit)));
+}
+
+// The same counts, for 8 candidates at a time (two independent chains): each x[j] is compared
+// with 8 values at once, and the candidates with too many below are masked out. x is padded
+// with +inf to a multiple of 8; a +inf candidate has every finite value below it.
+__attribute__((target("avx2"))) bool rank_pair_avx2(const double* x, int n, int padded, int rank,
+                                                    double* lo, double* hi) {
+  const __m256d none = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+  const __m256i k = _mm256_set1_epi64x(rank);
+  const __m256i k1 = _mm256_set1_epi64x(rank - 1);
+  __m256d hv = none, lv = none, nan = _mm256_setzero_pd();
+  for (int i = 0; i < padded; i += 8) {
+    const __m256d v0 = _mm256_loadu_pd(x + i);
+    const __m256d v1 = _mm256_loadu_pd(x + i + 4);
+    nan = _mm256_or_pd(nan, _mm256_cmp_pd(v0, v1, _CMP_UNORD_Q));
+    __m256i c0 = _mm256_setzero_si256(), c1 = _mm256_setzero_si256();  // counts below
+    for (int j = 0; j < n; ++j) {
+      const __m256d b = _mm256_broadcast_sd(x + j);
+      c0 = _mm256_sub_epi64(c0, _mm256_castpd_si256(_mm256_cmp_pd(b, v0, _CMP_LT_OQ)));
+      c1 = _mm256_sub_epi64(c1, _mm256_castpd_si256(_mm256_cmp_pd(b, v1, _CMP_LT_OQ)));
+    }
+    hv = _mm256_max_pd(hv, _mm256_max_pd(at_most(v0, c0, k), at_most(v1, c1, k)));
+    lv = _mm256_max_pd(lv, _mm256_max_pd(at_most(v0, c0, k1), at_most(v1, c1, k1)));
+  }
+  if (_mm256_movemask_pd(nan) != 0) return false;
+  alignas(32) double h[4], l[4];
+  _mm256_store_pd(h, hv);
+  _mm256_store_pd(l, lv);
+  *hi = std::max(std::max(h[0], h[1]), std::max(h[2], h[3]));
+  *lo = std::max(std::max(l[0], l[1]), std::max(l[2], l[3]));
+  return true;
+}
+#endif
+
+// The (k - 1)-th and k-th smallest of x[0..n), x padded as median_padded says.
+void rank_pair(double* x, int n, int k, double* lo, double* hi) {
+  const int padded = (n + 7) & ~7;
+  for (int i = n; i < padded; ++i) x[i] = std::numeric_limits<double>::infinity();
+  // Counting is quadratic: past 64 values selection wins.
+  bool ok = false;
+  if (n <= 64) {
+#ifdef PTMKIT_PINV_X86
+    ok = has_avx2_fma() ? rank_pair_avx2(x, n, padded, k, lo, hi)
+                        : rank_pair_portable(x, n, k, lo, hi);
+#else
+    ok = rank_pair_portable(x, n, k, lo, hi);
+#endif
+  }
+  if (!ok) {  // many values, or a NaN (then whatever nth_element makes of it)
+    double* at = x + k;
+    std::nth_element(x, at, x + n);
+    *hi = *at;
+    *lo = k > 0 ? *std::max_element(x, at) : -std::numeric_limits<double>::infinity();
+  }
+}
+
+}  // namespace
+
+double median_padded(double* x, int n) {
+  if (n <= 0) return 0.0;
+  double lo = 0.0, hi = 0.0;
+  rank_pair(x, n, n / 2, &lo, &hi);
+  return n % 2 == 1 ? hi : 0.5 * (lo + hi);
+}
+
+double select_padded(double* x, int n, int k) {
+  double lo = 0.0, hi = 0.0;
+  rank_pair(x, n, k, &lo, &hi);
+  return hi;
+}
+
+// The portable path alone, for the tests.
+double median_padded_portable(double* x, int n) {
+  if (n <= 0) return 0.0;
+  double lo = 0.0, hi = 0.0;
+  if (!rank_pair_portable(x, n, n / 2, &lo, &hi)) return std::numeric_limits<double>::quiet_NaN();
+  return n % 2 == 1 ? hi : 0.5 * (lo + hi);
 }
 
 }  // namespace ptmkit::fit::internal
