@@ -101,6 +101,7 @@ void add_compare_command(CLI::App& root) {
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
   cmd->add_flag("!--no-ssim", args->options.ssim, "Skip the held-out SSIM");
+  add_robust_flags(cmd, &args->options.robust);
   cmd->callback([args] { run_compare(*args); });
 }
 

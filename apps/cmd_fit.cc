@@ -305,27 +305,7 @@ void add_fit_command(CLI::App& root) {
                   "specular samples; = lambert). Speed and accuracy: docs/SOLVERS.md")
       ->capture_default_str()
       ->check(CLI::IsMember(fit::solver_names()));
-  cmd->add_option("--shadow-k", args->options.robust.shadow_k,
-                  "sign/lambert: samples more than this many robust scales below the fit are "
-                  "shadows")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--highlight-k", args->options.robust.highlight_k,
-                  "sign/lambert: samples more than this many robust scales above the fit are "
-                  "highlights")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--readmit-k", args->options.robust.readmit_k,
-                  "sign/lambert: after the fit, re-admit rejected samples within this many "
-                  "robust scales of it and refit (0 = off). Raises label precision, costs "
-                  "truth PSNR (docs/SOLVERS.md)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--dark-fraction", args->options.robust.dark_fraction,
-                  "trim/sign/lambert: samples darker than this fraction of the texel's "
-                  "75th-percentile sample are shadows")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 0.99));
+  add_robust_flags(cmd, &args->options.robust);
   cmd->add_option("--residual-map", args->residual_map,
                   "Write the RMS residual over each texel's inlier samples (grey levels) as a "
                   "1-channel float .exr");

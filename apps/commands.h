@@ -5,6 +5,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "ptmkit/fit/robust.h"
+
 namespace ptmkit::app {
 
 void add_synth_command(CLI::App& root);
@@ -16,5 +18,9 @@ void add_direct_command(CLI::App& root);
 void add_compare_command(CLI::App& root);
 void add_calibrate_command(CLI::App& root);
 void add_calibrate_board_commands(CLI::App* calibrate);  // calibrate camera, calibrate plane
+
+// The robust solvers' tuning flags (--shadow-k, --highlight-k, --readmit-k, --dark-fraction,
+// --keep-within-grey, --no-fill), bound to *robust; shared by fit and compare.
+void add_robust_flags(CLI::App* cmd, fit::RobustOptions* robust);
 
 }  // namespace ptmkit::app

@@ -23,10 +23,9 @@ constexpr int kSize = 64;  // pixels: the presets' relief scaled down, same scen
 
 struct PresetCase {
   const char* preset;
-  // Gain of the default robust solver over least squares, PSNR against the diffuse truth over
-  // lit samples (evaluate.h). Issue 4's targets where met; where not, what is reached (64 px,
-  // measured 2.15 / 0.24 / 4.67 / 3.45 / 1.95 dB) minus 0.25 dB of margin, and the issue's
-  // target in the comment.
+  // Issue 4's target for the gain of the default robust solver over least squares, PSNR
+  // against the diffuse truth over lit samples (evaluate.h). Measured at 64 px: 3.22 / 0.87 /
+  // 5.99 / 4.48 / 3.22 dB.
   double min_gain_db;
 };
 // Readable test names in listings (gtest would otherwise print the struct's bytes).
@@ -44,27 +43,23 @@ TEST_P(RobustPresets, BeatsLeastSquaresOnTheDiffuseTruthAndOnNormals) {
   EXPECT_GE(robust.psnr_db - ls.psnr_db, c.min_gain_db) << c.preset;
   // Normals from the inliers beat normals from every sample (issue 4: on every preset).
   EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg) << c.preset;
-  // Samples more than 20 grey levels off the truth are found (issue target: recall >= 0.6).
+  // Samples more than 20 grey levels off the truth, labelled (issue 4: precision >= 0.8,
+  // recall >= 0.6; measured at 64 px: precision 0.86-0.97, recall 0.78-1.00).
   if (robust.outliers_lit.true_outliers > 0) {
     EXPECT_GE(robust.outliers_lit.recall, 0.6) << c.preset;
   }
-  // Precision: issue target 0.8 NOT reached. Rejected samples also include moderate specular
-  // (under 20 grey levels, still biasing) and grazing-lit dark samples; measured 0.51-0.56
-  // over lit samples on the presets with highlights, 0.19 on matte.
-  EXPECT_GE(robust.outliers_lit.precision, std::string(c.preset) == "matte" ? 0.15 : 0.45)
-      << c.preset;
+  EXPECT_GE(robust.outliers_lit.precision, 0.8) << c.preset;
   EXPECT_EQ(robust.report.outliers.samples, static_cast<std::uint64_t>(kSize * kSize * 49));
   EXPECT_GT(robust.report.outliers.shadows, 0u);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Presets, RobustPresets,
-    ::testing::Values(PresetCase{"default", 2.0},   // target +2.0: met
-                      PresetCase{"matte", -0.1},    // target >= -0.1: met (+0.24)
-                      PresetCase{"glossy", 4.0},    // target +4.0: met
-                      PresetCase{"tall", 3.2},      // target +4.0: NOT met (+3.45 at 64 px)
-                      PresetCase{"ambient", 1.5}),  // target +1.5: met
-    [](const ::testing::TestParamInfo<PresetCase>& p) { return std::string(p.param.preset); });
+INSTANTIATE_TEST_SUITE_P(Presets, RobustPresets,
+                         ::testing::Values(PresetCase{"default", 2.0}, PresetCase{"matte", -0.1},
+                                           PresetCase{"glossy", 4.0}, PresetCase{"tall", 4.0},
+                                           PresetCase{"ambient", 1.5}),
+                         [](const ::testing::TestParamInfo<PresetCase>& p) {
+                           return std::string(p.param.preset);
+                         });
 
 TEST(RobustSolver, SolverNamesRoundTripAndUnknownNamesAreRefused) {
   for (const auto& name : solver_names()) EXPECT_EQ(to_string(parse_solver(name)), name);
@@ -257,13 +252,15 @@ namespace ptmkit::fit {
 namespace {
 
 // RobustOptions::readmit_k trades truth PSNR for label precision (docs/SOLVERS.md, "Outlier
-// labelling precision"); it is off by default because it costs the default and tall presets
-// their PSNR targets.
+// labelling precision"); measured here on its own (keep_within, which does the same job
+// against the Lambertian model and is on by default, off on both sides).
 TEST(RobustSolver, ReadmissionRaisesLabelPrecision) {
   const auto stack = test::render_preset("default", 48);
-  RobustOptions readmit;
+  RobustOptions base;
+  base.keep_within = 0.0;
+  RobustOptions readmit = base;
   readmit.readmit_k = 2.5;
-  const auto off = test::score_solver(stack, Solver::kRobust);
+  const auto off = test::score_solver(stack, Solver::kRobust, base);
   const auto on = test::score_solver(stack, Solver::kRobust, readmit);
   ASSERT_GT(on.outliers_lit.true_outliers, 0u);
   EXPECT_GT(on.outliers_lit.precision, off.outliers_lit.precision + 0.1);
@@ -271,6 +268,35 @@ TEST(RobustSolver, ReadmissionRaisesLabelPrecision) {
   EXPECT_GE(on.outliers_lit.recall, 0.5);
   RobustOptions bad;
   bad.readmit_k = -1.0;
+  EXPECT_FALSE(bad.validate().empty());
+}
+
+}  // namespace
+}  // namespace ptmkit::fit
+
+namespace ptmkit::fit {
+namespace {
+
+// Filling the rejected samples with the Lambertian model (RobustOptions::fill_rejected) keeps
+// the polynomial from extrapolating into rejected regions; keeping the samples close to that
+// model (keep_within) leaves only sure labels. Each measured against the default with it off.
+TEST(RobustSolver, FillingAndKeepingCloseSamplesEachEarnTheirPlace) {
+  const auto stack = test::render_preset("tall", 48);
+  const auto both = test::score_solver(stack, Solver::kRobust);
+  RobustOptions no_fill;
+  no_fill.fill_rejected = false;
+  const auto unfilled = test::score_solver(stack, Solver::kRobust, no_fill);
+  EXPECT_GT(both.psnr_db, unfilled.psnr_db + 0.5);  // measured +1.35 dB
+  RobustOptions no_keep;
+  no_keep.keep_within = 0.0;
+  const auto unkept = test::score_solver(stack, Solver::kRobust, no_keep);
+  // Measured precision 0.96 against 0.56, recall 0.89 against 0.93.
+  EXPECT_GT(both.outliers_lit.precision, unkept.outliers_lit.precision + 0.2);
+  EXPECT_GE(both.outliers_lit.recall, 0.6);
+  // The price of keeping: the kept samples' deviations go into the fit (measured -0.52 dB).
+  EXPECT_GT(both.psnr_db, unkept.psnr_db - 1.0);
+  RobustOptions bad;
+  bad.keep_within = -1.0;
   EXPECT_FALSE(bad.validate().empty());
 }
 

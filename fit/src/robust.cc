@@ -110,6 +110,9 @@ std::string RobustOptions::validate() const {
   if (max_iterations < 1 || ceres_max_iterations < 1) return "iterations must be >= 1";
   if (min_inliers < kPtmTerms) return "min_inliers must be at least 6";
   if (!(readmit_k >= 0.0)) return "readmit_k must be >= 0 (0 = off)";
+  if (!(keep_within >= 0.0) || !std::isfinite(keep_within)) {
+    return "keep_within must be finite and >= 0 (0 = off)";
+  }
   return {};
 }
 
@@ -125,6 +128,12 @@ struct TexelSolver::Impl {
   Eigen::Matrix<double, kPtmTerms, Eigen::Dynamic> pinv;  // unweighted least squares
   // Scratch.
   std::vector<double> resid, scratch, value_copy;
+  Eigen::VectorXd fill_values;
+  // lambert_fit's cache: the samples of the last factorisation, and its result.
+  std::vector<std::uint8_t> lambert_mask;
+  Eigen::LDLT<Eigen::Matrix4d> lambert_ldlt;
+  bool lambert_cached = false, lambert_ok = false;
+  bool fill_ok = false;  // the last solve() found the Lambertian model fit to fill with
   std::vector<SampleLabel> trial;
   std::vector<double> trial_weights;
   std::vector<std::uint8_t> hard;  // label fixed by trimming
@@ -309,6 +318,9 @@ struct TexelSolver::Impl {
         std::copy(w.begin(), w.end(), weights);
         *c = next;
       }
+      if (solver == Solver::kLambert && opt.keep_within > 0.0 && !out.fallback) {
+        keep_close(value, saturated, weights, labels);
+      }
       if (solver == Solver::kLambert && !weighted(value, weights, c)) {
         // The settled inliers leave the polynomial degenerate: back to the trimmed set.
         trim(value, saturated, labels);
@@ -317,12 +329,34 @@ struct TexelSolver::Impl {
         out.fallback = true;
       }
       if (opt.readmit_k > 0.0 && !out.fallback) readmit(value, saturated, weights, labels, c);
+      fill_ok = solver == Solver::kLambert && opt.fill_rejected && !out.fallback &&
+                lambert_explains(value, weights, *c);
     }
     for (int i = 0; i < n; ++i) {
       out.shadows += labels[i] == SampleLabel::kShadow ? 1 : 0;
       out.highlights += labels[i] == SampleLabel::kHighlight ? 1 : 0;
     }
     return out;
+  }
+
+  // RobustOptions::keep_within: rejected, unclipped samples within keep_within of the
+  // Lambertian model fitted on the settled inliers become inliers again.
+  void keep_close(const double* value, const std::uint8_t* saturated, double* weights,
+                  SampleLabel* labels) {
+    Eigen::Vector4d g;
+    if (!lambert_fit(
+            value, [&](int i) { return labels[i] == SampleLabel::kInlier; }, &g))
+      return;
+    for (int i = 0; i < n; ++i) {
+      if (labels[i] == SampleLabel::kInlier || saturated[i] != 0) continue;
+      // Only where the model says the light reaches the surface: an attached shadow's dark
+      // sample matches the model's zero, but it carries no direction for the normal.
+      const double direct = lambert_rows[static_cast<std::size_t>(i)].head<3>().dot(g.head<3>());
+      if (direct > 0.0 && std::abs(value[i] - lambert_shade(i, g)) <= opt.keep_within) {
+        labels[i] = SampleLabel::kInlier;
+        weights[i] = 1.0;
+      }
+    }
   }
 
   // Re-admits rejected, unclipped samples within readmit_k scales of the polynomial fitted on
@@ -350,33 +384,99 @@ struct TexelSolver::Impl {
     *c = next;
   }
 
+  // value ~ max(0, l . g) + a by least squares over the samples where include(i): g and a.
+  // The factorisation is kept for the next call with the same samples (the same texel's
+  // other channels, its inlier set checked twice).
+  template <typename Include>
+  bool lambert_fit(const double* value, Include include, Eigen::Vector4d* g) {
+    bool same = lambert_cached;
+    for (int i = 0; i < n; ++i) {
+      const std::uint8_t in = include(i) ? 1 : 0;
+      auto& slot = lambert_mask[static_cast<std::size_t>(i)];
+      same = same && slot == in;
+      slot = in;
+    }
+    if (!same) {
+      lambert_cached = true;
+      lambert_ok = false;
+      std::array<double, 10> acc{};  // lower triangle of sum q q^T, from precomputed products
+      int used = 0;
+      for (int i = 0; i < n; ++i) {
+        if (lambert_mask[static_cast<std::size_t>(i)] == 0) continue;
+        const auto& o = lambert_outer[static_cast<std::size_t>(i)];
+        for (std::size_t t = 0; t < o.size(); ++t) acc[t] += o[t];
+        ++used;
+      }
+      if (used < 4) return false;
+      Eigen::Matrix4d m;
+      for (int a = 0, t = 0; a < 4; ++a) {
+        for (int c = 0; c <= a; ++c, ++t) m(a, c) = m(c, a) = acc[static_cast<std::size_t>(t)];
+      }
+      lambert_ldlt.compute(m);
+      lambert_ok = lambert_ldlt.info() == Eigen::Success && lambert_ldlt.isPositive();
+    }
+    if (!lambert_ok) return false;
+    Eigen::Vector4d rhs = Eigen::Vector4d::Zero();
+    for (int i = 0; i < n; ++i) {
+      if (lambert_mask[static_cast<std::size_t>(i)] != 0)
+        rhs += value[i] * lambert_rows[static_cast<std::size_t>(i)];
+    }
+    *g = lambert_ldlt.solve(rhs);
+    return g->allFinite();
+  }
+
+  double lambert_shade(int i, const Eigen::Vector4d& g) const {
+    const Eigen::Vector4d& q = lambert_rows[static_cast<std::size_t>(i)];
+    return std::max(0.0, q.head<3>().dot(g.head<3>())) + g(3);
+  }
+
   // Residuals against value ~ max(0, l . g) + a, fitted on the inliers.
   bool lambert_residuals(const double* value, const SampleLabel* labels) {
-    std::array<double, 10> acc{};  // lower triangle of sum q q^T, from precomputed products
-    Eigen::Vector4d rhs = Eigen::Vector4d::Zero();
-    int used = 0;
-    for (int i = 0; i < n; ++i) {
-      if (labels[i] != SampleLabel::kInlier) continue;
-      const auto& o = lambert_outer[static_cast<std::size_t>(i)];
-      for (std::size_t t = 0; t < o.size(); ++t) acc[t] += o[t];
-      rhs += value[i] * lambert_rows[static_cast<std::size_t>(i)];
-      ++used;
+    Eigen::Vector4d g;
+    if (!lambert_fit(
+            value, [&](int i) { return labels[i] == SampleLabel::kInlier; }, &g)) {
+      return false;
     }
-    if (used < 4) return false;
-    Eigen::Matrix4d m;
-    for (int a = 0, t = 0; a < 4; ++a) {
-      for (int c = 0; c <= a; ++c, ++t) m(a, c) = m(c, a) = acc[static_cast<std::size_t>(t)];
-    }
-    const Eigen::LDLT<Eigen::Matrix4d> ldlt(m);
-    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
-    const Eigen::Vector4d g = ldlt.solve(rhs);
-    if (!g.allFinite()) return false;
-    for (int i = 0; i < n; ++i) {
-      const Eigen::Vector4d& q = lambert_rows[static_cast<std::size_t>(i)];
-      const double shade = std::max(0.0, q.head<3>().dot(g.head<3>())) + g(3);
-      resid[static_cast<std::size_t>(i)] = value[i] - shade;
-    }
+    for (int i = 0; i < n; ++i) resid[static_cast<std::size_t>(i)] = value[i] - lambert_shade(i, g);
     return true;
+  }
+
+  // Whether the Lambertian model fits the inliers at least as well as the polynomial c, per
+  // degree of freedom (4 parameters against 6): only then is it trusted where samples were
+  // rejected. A surface the polynomial follows and the model does not keeps its own fit.
+  bool lambert_explains(const double* value, const double* weights, const Vec6& c) {
+    Eigen::Vector4d g;
+    const auto inlier = [&](int i) { return weights[i] > 0.0; };
+    if (!lambert_fit(value, inlier, &g)) return false;
+    double rss_poly = 0.0, rss_lambert = 0.0;
+    int m = 0;
+    for (int i = 0; i < n; ++i) {
+      if (!inlier(i)) continue;
+      ++m;
+      const double rp = value[i] - basis[static_cast<std::size_t>(i)].dot(c);
+      const double rl = value[i] - lambert_shade(i, g);
+      rss_poly += rp * rp;
+      rss_lambert += rl * rl;
+    }
+    if (m <= kPtmTerms) return false;
+    return rss_lambert / (m - 4) <= rss_poly / (m - kPtmTerms);
+  }
+
+  // RobustOptions::fill_rejected: the rejected samples (weight 0) replaced by the Lambertian
+  // model fitted on the others, then the shared least-squares pseudo-inverse.
+  bool filled(const double* value, const double* weights, Vec6* c) {
+    if (std::all_of(weights, weights + n, [](double w) { return w > 0.0; })) {
+      *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
+      return true;
+    }
+    Eigen::Vector4d g;
+    if (!lambert_fit(
+            value, [&](int i) { return weights[i] > 0.0; }, &g))
+      return false;
+    Eigen::VectorXd& v = fill_values;
+    for (int i = 0; i < n; ++i) v(i) = weights[i] > 0.0 ? value[i] : lambert_shade(i, g);
+    *c = pinv * v;
+    return c->allFinite();
   }
 
   double irls_weight(double u) const {
@@ -548,6 +648,8 @@ TexelSolver::TexelSolver(const Eigen::MatrixXd& design, Solver solver, const Rob
   const Eigen::MatrixXd normal = design.transpose() * design;
   impl_->pinv = normal.ldlt().solve(design.transpose());
   impl_->resid.assign(n, 0.0);
+  impl_->fill_values.resize(impl_->n);
+  impl_->lambert_mask.assign(n, 0);
   impl_->trial.assign(n, SampleLabel::kInlier);
   impl_->trial_weights.assign(n, 0.0);
   impl_->hard.assign(n, 0);
@@ -561,6 +663,7 @@ TexelOutcome TexelSolver::solve(const double* value, const std::uint8_t* saturat
   Impl& m = *impl_;
   Vec6 c;
   TexelOutcome out;
+  m.fill_ok = false;
   switch (m.solver) {
     case Solver::kTrim:
     case Solver::kSign:
@@ -582,7 +685,7 @@ TexelOutcome TexelSolver::solve(const double* value, const std::uint8_t* saturat
 bool TexelSolver::weighted_fit(const double* value, const double* weights, double coeffs[6]) {
   Impl& m = *impl_;
   Vec6 c;
-  const bool ok = m.weighted(value, weights, &c);
+  const bool ok = m.fill_ok ? m.filled(value, weights, &c) : m.weighted(value, weights, &c);
   if (!ok) c = m.pinv * Eigen::Map<const Eigen::VectorXd>(value, m.n);
   for (int k = 0; k < kPtmTerms; ++k) coeffs[k] = c(k);
   return ok;

@@ -108,6 +108,21 @@ struct RobustOptions {
   // scales is re-admitted and the polynomial refitted once: it was rejected while the fit was
   // still pulled by outliers. 0 turns this off. Labels are the final rejected set.
   double readmit_k = 0.0;
+  // lambert: once the labels settle, a rejected sample that is not clipped and that the
+  // Lambertian model (fitted on the inliers) says is lit, within keep_within of that model's
+  // value, is an inlier again: a deviation that small costs the fit little, and calling the
+  // sample a shadow or a highlight would mostly be a false alarm. 0 turns this off. Normalised
+  // units, like min_scale (17 / 255: 17 grey levels of an 8-bit image); scale it with HDR data.
+  // Chosen on the synth presets for label precision against truth PSNR (docs/SOLVERS.md, "Labels:
+  // keeping samples close to the model").
+  double keep_within = 17.0 / 255.0;
+  // lambert: the polynomial is fitted to every sample, each rejected one replaced by the
+  // Lambertian + ambient model's value (its diffuse estimate from the inliers), instead of to
+  // the inliers alone, which leaves the polynomial free to swing where samples were rejected
+  // (mostly the grazing lights). Only for texels where that model fits the inliers at least
+  // as well as the polynomial does, per degree of freedom (4 parameters against 6); elsewhere
+  // the inliers alone, so a surface that is not Lambertian keeps its own fit.
+  bool fill_rejected = true;
   // Ceres: run only on texels whose least-squares residuals show an outlier
   // (|r| > label_k * scale); other texels keep the least-squares fit. Saves most of the cost.
   bool ceres_only_where_needed = true;
@@ -143,8 +158,11 @@ class TexelSolver {
                      SampleLabel* labels, double coeffs[6]);
 
   // Weighted least squares of any channel with the given weights (the same normal matrix as
-  // the last solve() when weights are unchanged). Returns false if the weighted system is
-  // singular; coeffs are then the unweighted least-squares fit.
+  // the last solve() when weights are unchanged). For lambert, where the last solve() found
+  // the Lambertian model fit (RobustOptions::fill_rejected), the fit to every sample with the
+  // rejected ones (weight 0) replaced by that model, fitted to this channel's inliers.
+  // Returns false if the weighted system is singular; coeffs are then the unweighted
+  // least-squares fit.
   bool weighted_fit(const double* value, const double* weights, double coeffs[6]);
 
  private:
