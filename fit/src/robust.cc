@@ -40,6 +40,29 @@ constexpr std::array<SolverName, 13> kSolverNames = {{
 using Vec6 = Eigen::Matrix<double, kPtmTerms, 1>;
 using Mat6 = Eigen::Matrix<double, kPtmTerms, kPtmTerms>;
 
+// Normal matrices are summed as packed lower triangles (row by row) of per-light outer
+// products computed once: N (N + 1) / 2 multiply-adds a sample.
+template <int N>
+using Packed = std::array<double, static_cast<std::size_t>(N*(N + 1) / 2)>;
+
+template <int N>
+Packed<N> packed_outer(const Eigen::Matrix<double, N, 1>& v) {
+  Packed<N> p{};
+  for (int a = 0, t = 0; a < N; ++a) {
+    for (int c = 0; c <= a; ++c, ++t) p[static_cast<std::size_t>(t)] = v(a) * v(c);
+  }
+  return p;
+}
+
+template <int N>
+Eigen::Matrix<double, N, N> unpack_symmetric(const Packed<N>& p) {
+  Eigen::Matrix<double, N, N> m;
+  for (int a = 0, t = 0; a < N; ++a) {
+    for (int c = 0; c <= a; ++c, ++t) m(a, c) = m(c, a) = p[static_cast<std::size_t>(t)];
+  }
+  return m;
+}
+
 // One residual block per sample: r = b . c - y, with the analytic Jacobian b.
 class SampleCost final : public ceres::SizedCostFunction<1, kPtmTerms> {
  public:
@@ -120,11 +143,10 @@ struct TexelSolver::Impl {
   Solver solver;
   RobustOptions opt;
   int n = 0;
-  std::vector<Vec6> basis;  // rows of the design
-  static constexpr int kPacked = kPtmTerms * (kPtmTerms + 1) / 2;
-  std::vector<std::array<double, kPacked>> outer;         // lower triangle of b b^T, row by row
+  std::vector<Vec6> basis;                                // rows of the design
+  std::vector<Packed<kPtmTerms>> outer;                   // b b^T per light
   std::vector<Eigen::Vector4d> lambert_rows;              // (lx, ly, lz, 1) per light
-  std::vector<std::array<double, 10>> lambert_outer;      // lower triangle of q q^T
+  std::vector<Packed<4>> lambert_outer;                   // q q^T per light
   Eigen::Matrix<double, kPtmTerms, Eigen::Dynamic> pinv;  // unweighted least squares
   // Scratch.
   std::vector<double> resid, scratch, value_copy;
@@ -176,25 +198,21 @@ struct TexelSolver::Impl {
             0) {
       return true;
     }
-    // sum_i w_i b_i b_i^T from the precomputed products: 21 multiply-adds a sample, where a
-    // rank update through Eigen's general 6 x 6 path cost a tenth of the robust fit.
-    std::array<double, kPacked> acc{};
+    // sum_i w_i b_i b_i^T from the precomputed products (a rank update through Eigen's
+    // general 6 x 6 path cost a tenth of the robust fit).
+    Packed<kPtmTerms> acc{};
     int used = 0;
     for (int i = 0; i < n; ++i) {
       const double w = weights[i];
       if (w <= 0.0) continue;
       ++used;
       const auto& o = outer[static_cast<std::size_t>(i)];
-      for (int t = 0; t < kPacked; ++t) acc[t] += w * o[t];
+      for (std::size_t t = 0; t < acc.size(); ++t) acc[t] += w * o[t];
     }
     llt_weights.assign(weights, weights + n);
     llt_ok = false;
     if (used < kPtmTerms) return false;
-    Mat6 m;
-    for (int a = 0, t = 0; a < kPtmTerms; ++a) {
-      for (int c = 0; c <= a; ++c, ++t) m(a, c) = m(c, a) = acc[t];
-    }
-    llt.compute(m);
+    llt.compute(unpack_symmetric<kPtmTerms>(acc));
     if (llt.info() != Eigen::Success) return false;
     // Cheap conditioning check from the Cholesky diagonal: cond(M) >= (max L_ii / min L_ii)^2.
     const auto d = llt.matrixLLT().diagonal();
@@ -399,20 +417,16 @@ struct TexelSolver::Impl {
     if (!same) {
       lambert_cached = true;
       lambert_ok = false;
-      std::array<double, 10> acc{};  // lower triangle of sum q q^T, from precomputed products
+      Packed<4> acc{};
       int used = 0;
       for (int i = 0; i < n; ++i) {
         if (lambert_mask[static_cast<std::size_t>(i)] == 0) continue;
         const auto& o = lambert_outer[static_cast<std::size_t>(i)];
-        for (std::size_t t = 0; t < o.size(); ++t) acc[t] += o[t];
+        for (std::size_t t = 0; t < acc.size(); ++t) acc[t] += o[t];
         ++used;
       }
       if (used < 4) return false;
-      Eigen::Matrix4d m;
-      for (int a = 0, t = 0; a < 4; ++a) {
-        for (int c = 0; c <= a; ++c, ++t) m(a, c) = m(c, a) = acc[static_cast<std::size_t>(t)];
-      }
-      lambert_ldlt.compute(m);
+      lambert_ldlt.compute(unpack_symmetric<4>(acc));
       lambert_ok = lambert_ldlt.info() == Eigen::Success && lambert_ldlt.isPositive();
     }
     if (!lambert_ok) return false;
@@ -630,20 +644,11 @@ TexelSolver::TexelSolver(const Eigen::MatrixXd& design, Solver solver, const Rob
   impl_->lambert_rows.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     impl_->basis[i] = design.row(static_cast<Eigen::Index>(i)).transpose();
-    auto& o = impl_->outer.emplace_back();
-    for (int a = 0, t = 0; a < kPtmTerms; ++a) {
-      for (int c = 0; c <= a; ++c, ++t)
-        o[static_cast<std::size_t>(t)] = impl_->basis[i](a) * impl_->basis[i](c);
-    }
+    impl_->outer.push_back(packed_outer<kPtmTerms>(impl_->basis[i]));
     const double lu = impl_->basis[i](3);
     const double lv = impl_->basis[i](4);
     impl_->lambert_rows[i] << lu, lv, std::sqrt(std::max(0.0, 1.0 - lu * lu - lv * lv)), 1.0;
-    auto& q = impl_->lambert_outer.emplace_back();
-    for (int a = 0, t = 0; a < 4; ++a) {
-      for (int c = 0; c <= a; ++c, ++t) {
-        q[static_cast<std::size_t>(t)] = impl_->lambert_rows[i](a) * impl_->lambert_rows[i](c);
-      }
-    }
+    impl_->lambert_outer.push_back(packed_outer<4>(impl_->lambert_rows[i]));
   }
   const Eigen::MatrixXd normal = design.transpose() * design;
   impl_->pinv = normal.ldlt().solve(design.transpose());
