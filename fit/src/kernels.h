@@ -1,5 +1,6 @@
 // The fit's inner loops: the 6 x N pseudo-inverse applied to a band's N x M samples, 8-bit
-// samples to floats, and the LRGB luminance pass.
+// samples to floats, the LRGB and YCC luminance passes, and the robust solvers' exact medians
+// of a texel's samples.
 #pragma once
 
 #include <cstddef>
