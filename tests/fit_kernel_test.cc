@@ -77,22 +77,44 @@ TEST(PinvKernel, BytesGiveTheBitsOfConvertingFirst) {
   }
 }
 
-TEST(LumaKernel, BytesGiveTheBitsOfTheFloatRow) {
+// The one-pass LRGB row on bytes against its definition: convert, luma image by image, then
+// the product on the lumas. Widths around the 8-texel block, the images strided as a band's.
+TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
   std::mt19937_64 rng(test::test_seed());
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   std::uniform_int_distribution<int> byte(0, 255);
-  for (const int w : {1, 7, 8, 9, 10, 17, 4000}) {
-    std::vector<std::uint8_t> b(static_cast<std::size_t>(3 * w));
-    for (auto& v : b) v = static_cast<std::uint8_t>(byte(rng));
-    std::vector<float> f(b.size());
-    for (std::size_t k = 0; k < b.size(); ++k) f[k] = static_cast<float>(b[k]) / 255.0f;
-    const auto n = static_cast<std::size_t>(w);
-    std::vector<float> y1(n), y2(n), a1(4 * n, 0.25f), a2(4 * n, 0.25f);
-    for (int image = 0; image < 3; ++image) {  // the sums accumulate over images
-      internal::luma_lrgb_row(f.data(), w, y1.data(), &a1[0], &a1[n], &a1[2 * n], &a1[3 * n]);
-      internal::luma_lrgb_row_u8(b.data(), w, y2.data(), &a2[0], &a2[n], &a2[2 * n], &a2[3 * n]);
+  for (const int n : {6, 49}) {
+    for (const int w : {1, 7, 8, 9, 10, 17, 4000}) {
+      const std::ptrdiff_t stride = 3 * w * 2;  // two rows per image, the first one fitted
+      std::vector<float> p(static_cast<std::size_t>(6 * n));
+      for (float& v : p) v = u(rng);
+      // The last image ends with its first row: a read past a row's end shows under ASan.
+      std::vector<std::uint8_t> b(static_cast<std::size_t>((n - 1) * stride + 3 * w));
+      for (auto& v : b) v = static_cast<std::uint8_t>(byte(rng));
+      const auto nw = static_cast<std::size_t>(w);
+      // The definition.
+      std::vector<float> f(3 * nw), y(static_cast<std::size_t>(n) * nw), sums(4 * nw, 0.0f);
+      for (int i = 0; i < n; ++i) {
+        internal::bytes_to_unit(b.data() + i * stride, f.size(), f.data());
+        internal::luma_lrgb_row(f.data(), w, y.data() + i * nw, &sums[0], &sums[nw], &sums[2 * nw],
+                                &sums[3 * nw]);
+      }
+      std::vector<float> coeffs(6 * nw);
+      internal::apply_pinv(p.data(), n, y.data(), w, w, coeffs.data());
+      // The dispatched one-pass kernel, and its portable path.
+      for (const bool portable : {false, true}) {
+        std::vector<float> c(6 * nw, -1.0f), s(4 * nw, -1.0f);
+        if (portable) {
+          internal::lrgb_row_u8_portable(p.data(), n, b.data(), stride, 0, w, c.data(), &s[0],
+                                         &s[nw], &s[2 * nw], &s[3 * nw]);
+        } else {
+          internal::lrgb_row_u8(p.data(), n, b.data(), stride, w, c.data(), &s[0], &s[nw],
+                                &s[2 * nw], &s[3 * nw]);
+        }
+        ASSERT_EQ(c, coeffs) << "n " << n << " width " << w << (portable ? " portable" : "");
+        ASSERT_EQ(s, sums) << "n " << n << " width " << w << (portable ? " portable" : "");
+      }
     }
-    ASSERT_EQ(y1, y2) << "width " << w;
-    ASSERT_EQ(a1, a2) << "width " << w;
   }
 }
 

@@ -217,7 +217,7 @@ class BandFitter {
     const int w = width_;
     const int ch = channels_;
     const std::size_t row_offset = static_cast<std::size_t>(r) * w * ch;
-    // 8-bit bands: the RGB product and the LRGB luma pass read the bytes themselves;
+    // 8-bit bands: the RGB product and the one-pass LRGB row read the bytes themselves;
     // everything else gets this row of every image as floats first.
     const bool fast_bytes =
         band.is_u8 && ch == 3 && !st->active && options_.precision == Precision::kFloat;
@@ -230,12 +230,31 @@ class BandFitter {
                               static_cast<std::ptrdiff_t>(w) * 3, c_out);
       return;
     }
+    if (lrgb_bytes) {
+      // The luma, the colour sums and the product in one pass over the bytes.
+      thread_local std::vector<float> sums;
+      sums.resize(static_cast<std::size_t>(w) * 4);
+      float* s0 = sums.data();
+      float* s1 = s0 + w;
+      float* s2 = s1 + w;
+      float* s3 = s2 + w;
+      const auto& p = design_.pseudo_inverse_f();
+      internal::lrgb_row_u8(p.data(), static_cast<int>(p.cols()), band.image_u8(0) + row_offset,
+                            static_cast<std::ptrdiff_t>(band.image_stride()), w, c_out, s0, s1, s2,
+                            s3);
+      for (int x = 0; x < w; ++x) {
+        const double yc[3] = {s1[x], s2[x], s3[x]};
+        finish_lrgb_colour(s0[x], yc, col_out + static_cast<std::ptrdiff_t>(x) * 3,
+                           c_out + static_cast<std::ptrdiff_t>(x) * kPtmTerms);
+      }
+      return;
+    }
     thread_local std::vector<float> row_floats;
     const float* first = nullptr;
     auto stride = static_cast<Eigen::Index>(band.image_stride());
     if (!band.is_u8) {
       first = band.image(0) + row_offset;
-    } else if (!lrgb_bytes) {
+    } else {
       const std::size_t m = static_cast<std::size_t>(w) * ch;
       row_floats.resize(static_cast<std::size_t>(n) * m);
       for (int i = 0; i < n; ++i) {
@@ -301,11 +320,6 @@ class BandFitter {
       float* s3 = s2 + cw;
       for (int i = 0; i < n; ++i) {
         float* yi = y_scratch.data() + static_cast<std::ptrdiff_t>(i) * cw;
-        if (lrgb_bytes) {
-          internal::luma_lrgb_row_u8(band.image_u8(i) + row_offset + 3 * x0, cw, yi, s0, s1, s2,
-                                     s3);
-          continue;
-        }
         const float* s =
             samples.data() + static_cast<std::ptrdiff_t>(i) * samples.outerStride() + x0 * ch;
         if (ch != 3) {  // grey: colour (1, 1, 1) up to scale, chroma 0

@@ -23,6 +23,10 @@ constexpr auto kLumaGf = static_cast<float>(kLumaG);
 constexpr auto kLumaBf = static_cast<float>(kLumaB);
 constexpr std::ptrdiff_t kBlock = 16;   // columns per register block (two 8-float vectors)
 constexpr std::ptrdiff_t kAhead = 512;  // software prefetch distance in bytes (8-bit samples)
+// The same for the one-pass LRGB row, which reads 24 bytes per image where the product reads
+// 16: at 49 images, 512 bytes ahead is 25 KB of lines in flight, most of the L1 cache; 256 was
+// faster (bench/kernel_benchmark), and none at all 1.6x slower.
+constexpr std::ptrdiff_t kAheadLrgb = 256;
 
 // Columns [j0, j0 + count) with count <= kBlock, portable.
 void block_portable(const float* p, int n, const float* s, std::ptrdiff_t stride, std::ptrdiff_t j0,
@@ -189,36 +193,70 @@ __attribute__((target("avx2,fma"))) void bytes_to_unit_fma(const std::uint8_t* i
   for (; k < count; ++k) out[k] = static_cast<float>(in[k]) / 255.0f;
 }
 
-// luma_lrgb_row on 8-bit RGB: the same operations in the same order on the same floats, so
-// the same bits. The compiler leaves the interleaved form scalar, so by hand: 8 texels at a
-// time, de-interleaved with byte shuffles. Returns the texels done; the caller finishes.
-__attribute__((target("avx2,fma"))) int luma_lrgb_u8_avx2(const std::uint8_t* s, int w, float* yi,
-                                                          float* s0, float* s1, float* s2,
-                                                          float* s3) {
-  const __m128i gather = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
+// Eight texels of 8-bit RGB, interleaved, to three vectors of v / 255: 24 bytes from s,
+// read as two 16-byte loads at s and s + 8 (no byte past s + 23 is touched, so the last
+// texels of a buffer are safe), de-interleaved with byte shuffles.
+__attribute__((target("avx2,fma"))) inline void rgb8_unit(const std::uint8_t* s, __m256* r,
+                                                          __m256* g, __m256* b) {
+  const __m128i lo_mask = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
+  const __m128i hi_mask = _mm_setr_epi8(4, 7, 10, 13, 5, 8, 11, 14, 6, 9, 12, 15, -1, -1, -1, -1);
+  const __m128i a = _mm_shuffle_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s)),
+                                     lo_mask);  // R0-3 G0-3 B0-3 .
+  const __m128i c = _mm_shuffle_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 8)),
+                                     hi_mask);  // R4-7 G4-7 B4-7 .
+  const __m128i rg = _mm_unpacklo_epi32(a, c);  // R0-3 R4-7 G0-3 G4-7
+  const __m128i bb = _mm_unpackhi_epi32(a, c);  // B0-3 B4-7 . .
+  *r = unit8_fma(_mm256_cvtepu8_epi32(rg));
+  *g = unit8_fma(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8)));
+  *b = unit8_fma(_mm256_cvtepu8_epi32(bb));
+}
+
+// lrgb_row_u8, 8 texels at a time; returns the texels done (a multiple of 8), the caller
+// finishes. Per block, image after image: the luma (separate multiplies and adds, as
+// luma_lrgb_row: the build forbids contraction), the four colour sums, and the product's
+// fused multiply-adds, all in registers: no luma row is written and read back.
+__attribute__((target("avx2,fma"))) int lrgb_row_u8_avx2(const float* p, int n,
+                                                         const std::uint8_t* s,
+                                                         std::ptrdiff_t stride, int w,
+                                                         float* coeffs, float* s0, float* s1,
+                                                         float* s2, float* s3) {
   const __m256 kr = _mm256_set1_ps(kLumaRf);
   const __m256 kg = _mm256_set1_ps(kLumaGf);
   const __m256 kb = _mm256_set1_ps(kLumaBf);
   int x = 0;
-  // Two 16-byte loads at 3x and 3x + 12 read up to byte 3x + 27 of the row.
-  for (; 3 * x + 28 <= 3 * w; x += 8) {
-    __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x));
-    __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + 3 * x + 12));
-    a = _mm_shuffle_epi8(a, gather);              // R0-3 G0-3 B0-3 .
-    b = _mm_shuffle_epi8(b, gather);              // R4-7 G4-7 B4-7 .
-    const __m128i rg = _mm_unpacklo_epi32(a, b);  // R0-3 R4-7 G0-3 G4-7
-    const __m128i bb = _mm_unpackhi_epi32(a, b);  // B0-3 B4-7 . .
-    const __m256 r = unit8_fma(_mm256_cvtepu8_epi32(rg));
-    const __m256 g = unit8_fma(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8)));
-    const __m256 bl = unit8_fma(_mm256_cvtepu8_epi32(bb));
-    // Separate multiplies and adds (the build forbids contraction): luma_lrgb_row's bits.
-    const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
-                                   _mm256_mul_ps(kb, bl));
-    _mm256_storeu_ps(yi + x, l);
-    _mm256_storeu_ps(s0 + x, _mm256_add_ps(_mm256_loadu_ps(s0 + x), _mm256_mul_ps(l, l)));
-    _mm256_storeu_ps(s1 + x, _mm256_add_ps(_mm256_loadu_ps(s1 + x), _mm256_mul_ps(l, r)));
-    _mm256_storeu_ps(s2 + x, _mm256_add_ps(_mm256_loadu_ps(s2 + x), _mm256_mul_ps(l, g)));
-    _mm256_storeu_ps(s3 + x, _mm256_add_ps(_mm256_loadu_ps(s3 + x), _mm256_mul_ps(l, bl)));
+  for (; x + 8 <= w; x += 8) {
+    __m256 acc[kTerms];
+    for (int k = 0; k < kTerms; ++k) acc[k] = _mm256_setzero_ps();
+    __m256 yy = _mm256_setzero_ps(), yr = yy, yg = yy, yb = yy;
+    const std::ptrdiff_t at = 3 * static_cast<std::ptrdiff_t>(x);
+    // One stream per image is more than the hardware prefetcher follows: fetch each image's
+    // line kAheadLrgb bytes on, once per 64 bytes (a block is 24).
+    const bool fetch = (at & 63) < 24;
+    for (int i = 0; i < n; ++i) {
+      const std::uint8_t* row = s + static_cast<std::ptrdiff_t>(i) * stride + at;
+      if (fetch) _mm_prefetch(reinterpret_cast<const char*>(row + kAheadLrgb), _MM_HINT_T0);
+      __m256 r, g, b;
+      rgb8_unit(row, &r, &g, &b);
+      const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
+                                     _mm256_mul_ps(kb, b));
+      yy = _mm256_add_ps(yy, _mm256_mul_ps(l, l));
+      yr = _mm256_add_ps(yr, _mm256_mul_ps(l, r));
+      yg = _mm256_add_ps(yg, _mm256_mul_ps(l, g));
+      yb = _mm256_add_ps(yb, _mm256_mul_ps(l, b));
+      const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
+      for (int k = 0; k < kTerms; ++k) {
+        acc[k] = _mm256_fmadd_ps(_mm256_broadcast_ss(pi + k), l, acc[k]);
+      }
+    }
+    _mm256_storeu_ps(s0 + x, yy);
+    _mm256_storeu_ps(s1 + x, yr);
+    _mm256_storeu_ps(s2 + x, yg);
+    _mm256_storeu_ps(s3 + x, yb);
+    alignas(32) float tmp[kTerms][8];
+    for (int k = 0; k < kTerms; ++k) _mm256_store_ps(tmp[k], acc[k]);
+    for (int t = 0; t < 8; ++t) {
+      for (int k = 0; k < kTerms; ++k) coeffs[(x + t) * kTerms + k] = tmp[k][t];
+    }
   }
   return x;
 }
@@ -266,18 +304,39 @@ __attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float*
   }
 }
 
-void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float* s1, float* s2,
-                      float* s3) {
+void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
+                          int x0, int w, float* coeffs, float* s0, float* s1, float* s2,
+                          float* s3) {
+  for (int x = x0; x < w; ++x) {
+    float acc[kTerms] = {};
+    float yy = 0.0f, yr = 0.0f, yg = 0.0f, yb = 0.0f;
+    for (int i = 0; i < n; ++i) {
+      const std::uint8_t* t = s + static_cast<std::ptrdiff_t>(i) * stride + 3 * x;
+      const float r = static_cast<float>(t[0]) / 255.0f;
+      const float g = static_cast<float>(t[1]) / 255.0f;
+      const float b = static_cast<float>(t[2]) / 255.0f;
+      const float l = kLumaRf * r + kLumaGf * g + kLumaBf * b;
+      yy += l * l;
+      yr += l * r;
+      yg += l * g;
+      yb += l * b;
+      for (int k = 0; k < kTerms; ++k) acc[k] = std::fma(p[i * kTerms + k], l, acc[k]);
+    }
+    s0[x] = yy;
+    s1[x] = yr;
+    s2[x] = yg;
+    s3[x] = yb;
+    std::copy_n(acc, kTerms, coeffs + static_cast<std::ptrdiff_t>(x) * kTerms);
+  }
+}
+
+void lrgb_row_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride, int w,
+                 float* coeffs, float* s0, float* s1, float* s2, float* s3) {
   int done = 0;
 #ifdef PTMKIT_PINV_X86
-  if (has_avx2_fma()) done = luma_lrgb_u8_avx2(s, w, yi, s0, s1, s2, s3);
+  if (has_avx2_fma()) done = lrgb_row_u8_avx2(p, n, s, stride, w, coeffs, s0, s1, s2, s3);
 #endif
-  float rgb[3 * 8];
-  for (int x = done; x < w; x += 8) {  // the rest (or all) through the float row code
-    const int m = std::min(8, w - x);
-    bytes_to_unit(s + 3 * x, static_cast<std::size_t>(3 * m), rgb);
-    luma_lrgb_row(rgb, m, yi + x, s0 + x, s1 + x, s2 + x, s3 + x);
-  }
+  lrgb_row_u8_portable(p, n, s, stride, done, w, coeffs, s0, s1, s2, s3);
 }
 
 // ---- exact medians of small sets ----

@@ -1,5 +1,6 @@
 // The fit's inner loops: the 6 x N pseudo-inverse applied to a band's N x M samples, 8-bit
-// samples to floats, the LRGB and YCC luminance passes, and the robust solvers' exact medians
+// samples to floats, the LRGB and YCC luminance passes (and the one-pass LRGB row on bytes),
+// and the robust solvers' exact medians
 // of a texel's samples.
 #pragma once
 
@@ -39,9 +40,17 @@ void luma_lrgb_row(const float* s, int w, float* yi, float* s0, float* s1, float
 // s0 += max(l, 0), s1 += max(l, 0) * Cb, s2 += max(l, 0) * Cr.
 void luma_ycc_row(const float* s, int w, float* yi, float* s0, float* s1, float* s2);
 
-// luma_lrgb_row on 8-bit samples (converted as bytes_to_unit does): the same bits.
-void luma_lrgb_row_u8(const std::uint8_t* s, int w, float* yi, float* s0, float* s1, float* s2,
-                      float* s3);
+// The whole LRGB fit of one row of w texels of 8-bit RGB, in one pass: image i's row starts at
+// s + i * stride bytes. Per texel, coeffs[6 x .. 6 x + 5] = p (6 x n, as apply_pinv's) times
+// its n lumas, and s0..s3[x] the colour sums of luma_lrgb_row (from zero). The same bits as
+// converting the bytes (bytes_to_unit), luma_lrgb_row image by image, then apply_pinv on the
+// lumas; without writing and re-reading a luma row per image.
+void lrgb_row_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride, int w,
+                 float* coeffs, float* s0, float* s1, float* s2, float* s3);
+
+// lrgb_row_u8's portable path alone, for texels x0 .. w - 1 (for tests: the same bits).
+void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
+                          int x0, int w, float* coeffs, float* s0, float* s1, float* s2, float* s3);
 
 // The exact median of x[0..n) (the mean of the two middle values when n is even), for the
 // robust solvers' scale. x must have room for n rounded up to a multiple of 8: the tail is
