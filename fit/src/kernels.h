@@ -1,7 +1,6 @@
 // The fit's inner loops: the 6 x N pseudo-inverse applied to a band's N x M samples, 8-bit
 // samples to floats, the LRGB and YCC luminance passes (and the one-pass LRGB row on bytes),
-// and the robust solvers' exact medians
-// of a texel's samples.
+// and the robust solvers' exact medians of a texel's samples.
 #pragma once
 
 #include <cstddef>
