@@ -16,6 +16,7 @@
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
+#include <tbb/task_group.h>
 
 #include "ptm_internal.h"
 #include "ptmkit/core/atomic_file.h"
@@ -488,6 +489,30 @@ void PtmStreamWriter::end() {
   for (int p = 0; p < np; ++p) {
     for (int i = 0; i < kPtmTerms; ++i) half_at[p * kPtmTerms + i] = half_index(p, i);
   }
+  // The relit error needs only the sample and the quantisation: it runs beside the encoding,
+  // whose in-order writing leaves a core idle part of the time.
+  PtmWriteReport relit_report;
+  tbb::task_group relit;
+  if (s.sample_stride > 0) {
+    relit.run([&] {
+      const SampleSource source(s, q);
+      const auto file_value = [&](int x, int y, double lu, double lv, float v[3]) {
+        source.file_value(x, y, lu, lv, v);
+      };
+      internal::relit_error(source, file_value, s.width, texels, options_, &relit_report);
+    });
+  }
+  // On an error below, the relit task must end before what it reads goes away (its own error,
+  // if any, then matters less than the one being thrown).
+  struct WaitOnExit {
+    tbb::task_group& group;
+    ~WaitOnExit() {
+      try {
+        group.wait();
+      } catch (...) {
+      }
+    }
+  } wait_relit{relit};
   AtomicOutput out(path_);
   {
     Fd fd(::open(out.temp_path().c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
@@ -622,13 +647,11 @@ void PtmStreamWriter::end() {
   }
   report_.max_coeff_error = mx;
   report_.rms_coeff_error = std::sqrt(sq / static_cast<double>(texels * np * kPtmTerms));
-  if (s.sample_stride > 0) {
-    const SampleSource source(s, q);
-    const auto file_value = [&](int x, int y, double lu, double lv, float v[3]) {
-      source.file_value(x, y, lu, lv, v);
-    };
-    internal::relit_error(source, file_value, s.width, texels, options_, &report_);
-  }
+  relit.wait();
+  report_.relit_mean_abs_grey = relit_report.relit_mean_abs_grey;
+  report_.relit_max_abs_grey = relit_report.relit_max_abs_grey;
+  report_.relit_psnr_db = relit_report.relit_psnr_db;
+  report_.relit_samples = relit_report.relit_samples;
   out.commit();
   report_.path = path_;
   report_.file_bytes = header.size() + texels * internal::bytes_per_texel(s.format);
