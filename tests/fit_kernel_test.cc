@@ -2,8 +2,10 @@
 // bits as the portable ones; the product matches double precision, and 8-bit samples become
 // exactly v / 255.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -113,6 +115,56 @@ TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
         }
         ASSERT_EQ(c, coeffs) << "n " << n << " width " << w << (portable ? " portable" : "");
         ASSERT_EQ(s, sums) << "n " << n << " width " << w << (portable ? " portable" : "");
+      }
+    }
+  }
+}
+
+// The row version of the LRGB colour against the per-texel one, on sums that reach every
+// branch: unlit texels (yy at or below 1e-20), negative and zero colour sums, black texels
+// (largest channel at or below 1e-12), NaN.
+TEST(LrgbColourKernel, RowGivesTheBitsOfEachTexel) {
+  std::mt19937_64 rng(test::test_seed());
+  std::uniform_real_distribution<float> u(-0.2f, 2.0f);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float special_yy[] = {0.0f, -0.0f, 1e-21f, 1e-20f, 1.01e-20f, 1.2e-20f, -1.0f, nan};
+  const float near_black[] = {0.0f, -0.0f, -1.0f, 0.9e-12f, 1e-12f, 1.1e-12f, nan};
+  for (const int w : {1, 3, 4, 5, 8, 1001}) {
+    const auto n = static_cast<std::size_t>(w);
+    std::vector<float> sums(4 * n), coeffs(6 * n);
+    for (float& v : sums) v = u(rng);
+    for (std::size_t x = 0; x < n; ++x) {
+      switch (rng() % 4) {
+        case 0:  // unlit
+          sums[x] = special_yy[rng() % std::size(special_yy)];
+          break;
+        case 1:  // every channel at or near the black threshold (yy = 1: k = the sum)
+          sums[x] = 1.0f;
+          for (int c = 1; c <= 3; ++c) sums[c * n + x] = near_black[rng() % std::size(near_black)];
+          break;
+        default:
+          break;
+      }
+    }
+    for (float& c : coeffs) c = u(rng);
+    std::vector<float> row_colour(3 * n), row_coeffs = coeffs;
+    internal::finish_lrgb_row(&sums[0], &sums[n], &sums[2 * n], &sums[3 * n], w, row_colour.data(),
+                              row_coeffs.data());
+    for (std::size_t x = 0; x < n; ++x) {
+      const double yc[3] = {sums[n + x], sums[2 * n + x], sums[3 * n + x]};
+      float colour[3];
+      float c[6];
+      std::copy_n(&coeffs[6 * x], 6, c);
+      internal::finish_lrgb_colour(sums[x], yc, colour, c);
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_EQ(std::bit_cast<std::uint32_t>(row_colour[3 * x + k]),
+                  std::bit_cast<std::uint32_t>(colour[k]))
+            << "texel " << x << " of " << w;
+      }
+      for (int k = 0; k < 6; ++k) {
+        ASSERT_EQ(std::bit_cast<std::uint32_t>(row_coeffs[6 * x + k]),
+                  std::bit_cast<std::uint32_t>(c[k]))
+            << "texel " << x << " of " << w;
       }
     }
   }

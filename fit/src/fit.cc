@@ -149,22 +149,6 @@ int residual_row_step(int width, int height) {
   return std::max(1, static_cast<int>(std::ceil(texels / kResidualSampleTexels)));
 }
 
-// LRGB colour from the sums yy = sum w Y^2 and yc = sum w Y rgb: the least-squares colour
-// k_c = yc / yy, scaled so its largest channel is 1, the luminance polynomial carrying the scale.
-void finish_lrgb_colour(double yy, const double yc[3], float* colour, float* coeffs) {
-  double k[3] = {1.0, 1.0, 1.0};
-  if (yy > 1e-20) {
-    for (int c = 0; c < 3; ++c) k[c] = std::max(0.0, yc[c] / yy);
-  }
-  double m = std::max({k[0], k[1], k[2]});
-  if (m <= 1e-12) {
-    k[0] = k[1] = k[2] = 1.0;
-    m = 1.0;
-  }
-  for (int c = 0; c < 3; ++c) colour[c] = static_cast<float>(k[c] / m);
-  for (int t = 0; t < kPtmTerms; ++t) coeffs[t] = static_cast<float>(coeffs[t] * m);
-}
-
 // The seed paper's constant chromaticity from luminance-weighted sums of Cb and Cr.
 void finish_ycc_chroma(double sy, double scb, double scr, float* colour) {
   colour[0] = sy > 1e-20 ? static_cast<float>(scb / sy) : 0.0f;
@@ -319,11 +303,7 @@ class BandFitter {
     float* s3 = s2 + w;
     internal::lrgb_row_u8(p.data(), static_cast<int>(p.cols()), first, stride, w, c_out, s0, s1, s2,
                           s3);
-    for (int x = 0; x < w; ++x) {
-      const double yc[3] = {s1[x], s2[x], s3[x]};
-      finish_lrgb_colour(s0[x], yc, col_out + static_cast<std::ptrdiff_t>(x) * 3,
-                         c_out + static_cast<std::ptrdiff_t>(x) * kPtmTerms);
-    }
+    internal::finish_lrgb_row(s0, s1, s2, s3, w, col_out, c_out);
   }
 
   // Any model from a row's float samples (N x W * channels).
@@ -400,7 +380,7 @@ class BandFitter {
         float* col = col_out + static_cast<std::ptrdiff_t>(x0 + x) * ncol;
         if (lrgb) {
           const double yc[3] = {s1[x], s2[x], s3[x]};
-          finish_lrgb_colour(s0[x], yc, col, c_chunk + x * kPtmTerms);
+          internal::finish_lrgb_colour(s0[x], yc, col, c_chunk + x * kPtmTerms);
         } else {
           finish_ycc_chroma(s0[x], s1[x], s2[x], col);
         }
@@ -501,7 +481,7 @@ class BandFitter {
         for (int k = 0; k < 3; ++k)
           yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
       }
-      finish_lrgb_colour(yy, yc, col, coef);
+      internal::finish_lrgb_colour(yy, yc, col, coef);
       return;
     }
     double sy = 0.0, scb = 0.0, scr = 0.0;

@@ -51,6 +51,16 @@ void lrgb_row_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t st
 void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
                           int x0, int w, float* coeffs, float* s0, float* s1, float* s2, float* s3);
 
+// LRGB colour from the sums yy = sum w Y^2 and yc = sum w Y rgb: the least-squares colour
+// k_c = yc / yy, scaled so its largest channel is 1 (colour[0..2]), the luminance polynomial
+// (coeffs[0..5]) carrying the scale.
+void finish_lrgb_colour(double yy, const double yc[3], float* colour, float* coeffs);
+
+// finish_lrgb_colour for a row of w texels from lrgb_row_u8's sums: colour[3 x ..],
+// coeffs[6 x ..]. The same bits (4 texels at a time in double with AVX2).
+void finish_lrgb_row(const float* s0, const float* s1, const float* s2, const float* s3, int w,
+                     float* colour, float* coeffs);
+
 // The exact median of x[0..n) (the mean of the two middle values when n is even), for the
 // robust solvers' scale. x must have room for n rounded up to a multiple of 8: the tail is
 // overwritten with +inf, and x[0..n) may be reordered. Up to 64 values, by counting for each
