@@ -612,5 +612,36 @@ TEST(PtmStream, MisuseAndBadValuesLeaveNoFile) {
   EXPECT_TRUE(test::list_files(dir.path()).empty());
 }
 
+// The writer's range pass takes 4 texels' terms at a time and the rest one by one: a bad
+// value anywhere (either part, any term) is caught, and the ranges, so the scales and biases,
+// are write_ptm's. Bands of 3 rows of 9 texels leave a tail in both formats.
+TEST(PtmStream, BadValueInAnyTermIsCaughtAndRangesMatch) {
+  test::ScratchDir dir;
+  for (const ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB}) {
+    SCOPED_TRACE(std::string(to_string(model)));
+    const CoefficientMap map = smooth_map(9, 6, model);
+    {
+      PtmStreamWriter writer(dir / "clean.ptm");
+      stream_map(map, 3, writer);
+      write_ptm(dir / "direct.ptm", map);
+      EXPECT_EQ(read_ptm_file(dir / "clean.ptm").quantisation,
+                read_ptm_file(dir / "direct.ptm").quantisation);
+    }
+    const std::size_t band_values = 3u * 9u * static_cast<std::size_t>(map.polynomials()) * 6u;
+    for (const float bad :
+         {std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+          std::numeric_limits<float>::quiet_NaN(), 70000.0f, -70000.0f}) {
+      for (const std::size_t at : {std::size_t{0}, std::size_t{5}, std::size_t{29}, band_values - 1,
+                                   band_values + 3, map.coeffs.size() - 1}) {
+        CoefficientMap broken = map;
+        broken.coeffs[at] = bad;
+        PtmStreamWriter writer(dir / "bad.ptm");
+        EXPECT_THROW(stream_map(broken, 3, writer), Error) << "value " << bad << " at " << at;
+      }
+    }
+  }
+  EXPECT_THAT(test::list_files(dir.path()), ::testing::ElementsAre("clean.ptm", "direct.ptm"));
+}
+
 }  // namespace
 }  // namespace ptmkit::texture

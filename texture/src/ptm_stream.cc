@@ -74,6 +74,67 @@ __attribute__((target_clones("avx2", "default"))) void colour_bytes(const float*
 // Largest float that rounds to a finite half: 65504 plus just under half a step (16).
 constexpr float kHalfLimit = 65520.0f;
 
+// Per coefficient index (position mod 6 of a kRGB or kLRGB band), the smallest and largest
+// value; false if any is NaN, infinite or beyond half range. Both paths give the same answer
+// (a minimum or maximum does not depend on the order it is taken in; a zero is made +0).
+struct Range {
+  std::array<float, kPtmTerms> lo, hi;
+  bool finite = true;
+};
+
+void range_portable(const float* in, std::size_t n, Range* r) {
+  for (std::size_t k = 0; k < n; k += kPtmTerms) {
+    for (int i = 0; i < kPtmTerms; ++i) {
+      const float v = in[k + static_cast<std::size_t>(i)];
+      r->finite &= std::abs(v) < kHalfLimit;  // NaN, inf, or beyond half range
+      r->lo[static_cast<std::size_t>(i)] = std::min(r->lo[static_cast<std::size_t>(i)], v);
+      r->hi[static_cast<std::size_t>(i)] = std::max(r->hi[static_cast<std::size_t>(i)], v);
+    }
+  }
+}
+
+// to_half and the range in one pass over a band's coefficients (they were two, each reading
+// the whole band): 24 values (4 texels' terms) a step, in three vectors whose lanes hold
+// terms 0-5 0-1, 2-5 0-3 and 4-5 0-5.
+__attribute__((target("avx,f16c"))) void half_and_range_f16c(const float* in, std::size_t n,
+                                                             std::uint16_t* out, Range* r) {
+  constexpr std::size_t kStep = 24;
+  __m256 lo[3], hi[3];
+  for (int j = 0; j < 3; ++j) {
+    lo[j] = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+    hi[j] = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+  }
+  const __m256 limit = _mm256_set1_ps(kHalfLimit);
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+  std::size_t k = 0;
+  for (; k + kStep <= n; k += kStep) {
+    for (int j = 0; j < 3; ++j) {
+      const __m256 v = _mm256_loadu_ps(in + k + 8 * j);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(out + k + 8 * j),
+                       _mm256_cvtps_ph(v, _MM_FROUND_TO_NEAREST_INT));
+      ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_and_ps(v, abs_mask), limit, _CMP_LT_OQ));
+      lo[j] = _mm256_min_ps(v, lo[j]);  // a NaN leaves lo (and is caught by ok)
+      hi[j] = _mm256_max_ps(v, hi[j]);
+    }
+  }
+  alignas(32) float l[3][8], h[3][8];
+  for (int j = 0; j < 3; ++j) {
+    _mm256_store_ps(l[j], lo[j]);
+    _mm256_store_ps(h[j], hi[j]);
+  }
+  for (int j = 0; j < 3; ++j) {
+    for (int t = 0; t < 8; ++t) {
+      const auto i = static_cast<std::size_t>((8 * j + t) % kPtmTerms);
+      r->lo[i] = std::min(r->lo[i], l[j][t]);
+      r->hi[i] = std::max(r->hi[i], h[j][t]);
+    }
+  }
+  r->finite &= _mm256_movemask_ps(ok) == 0xff;
+  to_half(in + k, n - k, out + k);
+  range_portable(in + k, n - k, r);
+}
+
 // A POSIX file descriptor closed on scope exit.
 struct Fd {
   int fd = -1;
@@ -366,8 +427,7 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
   }
   // The values whose range sets the quantisation: the file polynomials as floats, before
   // rounding to half (so the scales and biases are exactly write_ptm's).
-  const float* polys = coeffs;  // kRGB and kLRGB: the fit's layout is the file's
-  std::size_t polys_per_texel = hpt;
+  Range range{s.lo, s.hi, true};
   if (s.model == ColourModel::kYCC) {
     s.band_polys.resize(band_texels * 3 * kPtmTerms);
     std::vector<float> packed(band_texels * hpt);
@@ -379,29 +439,21 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
       std::copy_n(p, kPtmTerms - 1, k);
       for (int c = 0; c < 3; ++c) k[kPtmTerms - 1 + c] = p[c * kPtmTerms + kPtmTerms - 1];
     }
-    polys = s.band_polys.data();
-    polys_per_texel = 3 * kPtmTerms;
     to_half(packed.data(), packed.size(), dst);
+    range_portable(s.band_polys.data(), s.band_polys.size(), &range);
+  } else if (kHaveF16C) {
+    // kRGB and kLRGB: the fit's layout is the file's.
+    half_and_range_f16c(coeffs, band_texels * hpt, dst, &range);
   } else {
     to_half(coeffs, band_texels * hpt, dst);
+    range_portable(coeffs, band_texels * hpt, &range);
   }
-  // Range and finiteness, one accumulator per coefficient index (the loop vectorises).
-  {
-    std::array<float, kPtmTerms> lo = s.lo, hi = s.hi;
-    bool bad = false;
-    const std::size_t n = band_texels * polys_per_texel;
-    for (std::size_t k = 0; k < n; k += kPtmTerms) {
-      for (int i = 0; i < kPtmTerms; ++i) {
-        const float v = polys[k + i];
-        bad |= !(std::abs(v) < kHalfLimit);  // NaN, inf, or beyond half range
-        lo[i] = std::min(lo[i], v);
-        hi[i] = std::max(hi[i], v);
-      }
-    }
-    if (bad) s.finite = false;
-    s.lo = lo;
-    s.hi = hi;
+  // A zero bound is +0 whichever zero was met first (0.0f + -0.0f is +0).
+  for (int i = 0; i < kPtmTerms; ++i) {
+    s.lo[static_cast<std::size_t>(i)] = range.lo[static_cast<std::size_t>(i)] + 0.0f;
+    s.hi[static_cast<std::size_t>(i)] = range.hi[static_cast<std::size_t>(i)] + 0.0f;
   }
+  if (!range.finite) s.finite = false;
   if (s.model == ColourModel::kLRGB) {
     std::uint8_t* rgb = s.rgb.data() + first * 3;
     colour_bytes(colour, band_texels * 3, rgb);
