@@ -335,7 +335,7 @@ void add_fit_command(CLI::App& root) {
                 "Near lights: divide out the inverse-square fall-off relative to the plane "
                 "centre (needs --plane and --lights-json)");
   cmd->add_flag("!--no-residuals", args->options.residual_stats,
-                "Skip the residual statistics (saves about half the fit arithmetic)");
+                "Skip the residual statistics (a few percent of a large fit's time)");
   cmd->callback([args, cmd] {
     args->format_given = cmd->count("--format") > 0;
     run_fit(*args);

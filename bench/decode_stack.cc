@@ -1,5 +1,7 @@
 // Decode-only floor for `ptmkit fit`: streams every band of a capture's images through the
 // same StackReader the fit uses, and discards it. Usage: decode_stack LIGHTS.lp [THREADS]
+// [BAND_ROWS]. The default, 64 rows, is the fastest band measured for decoding alone (8 was
+// 20% slower; 128 and 500 no faster), so the floor is the decoder's, not the fit's banding.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -16,7 +18,7 @@ int main(int argc, char** argv) {
   }
   try {
     const int threads = argc > 2 ? std::atoi(argv[2]) : 0;
-    const int band_rows = argc > 3 ? std::atoi(argv[3]) : 8;
+    const int band_rows = argc > 3 ? std::atoi(argv[3]) : 64;
     const ptmkit::ThreadLimit limit(threads);
     const auto t0 = std::chrono::steady_clock::now();
     const ptmkit::LightSet lights = ptmkit::read_lp(argv[1]);

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Whole-fit benchmark: a generated 49-image, 12-megapixel JPEG stack (rendered once by
-# `ptmkit synth`), decode-only time through the same reader, then `ptmkit fit` (LRGB and RGB),
-# each the median of 3 runs, with peak resident memory. Figures go in docs/PERFORMANCE.md.
+# `ptmkit synth`), decode-only time through the same reader (at its fastest band size), then
+# `ptmkit fit` (LRGB and RGB), each the median of 3 runs, with peak resident memory. Figures go
+# in docs/PERFORMANCE.md.
 # Usage: scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench, 2 threads)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
 set -euo pipefail
