@@ -643,5 +643,40 @@ TEST(PtmStream, BadValueInAnyTermIsCaughtAndRangesMatch) {
   EXPECT_THAT(test::list_files(dir.path()), ::testing::ElementsAre("clean.ptm", "direct.ptm"));
 }
 
+// LRGB colour bytes, 16 at a time in the writer: the same bytes as write_ptm's, one by one,
+// for values on and beside every rounding half, out of range, signed zeros and NaN, in the
+// vector part and in the tail of each band (3 rows of 37 texels: 333 values, 13 in the tail).
+TEST(PtmStream, ColourBytesAreWritePtmsForEveryValue) {
+  test::ScratchDir dir;
+  CoefficientMap map = smooth_map(37, 5, ColourModel::kLRGB);
+  std::vector<float> values = {0.0f,
+                               -0.0f,
+                               -1e-9f,
+                               -0.5f,
+                               1.0f,
+                               1.0000001f,
+                               7.0f,
+                               std::numeric_limits<float>::quiet_NaN(),
+                               std::numeric_limits<float>::infinity(),
+                               -std::numeric_limits<float>::infinity()};
+  for (int k = 0; k < 255; ++k) {
+    const float h = static_cast<float>((k + 0.5) / 255.0);
+    values.insert(values.end(), {h, std::nextafter(h, 0.0f), std::nextafter(h, 1.0f),
+                                 static_cast<float>(k / 255.0)});
+  }
+  for (std::size_t k = 0; k < map.colour.size(); ++k) map.colour[k] = values[k % values.size()];
+  write_ptm(dir / "direct.ptm", map);
+  PtmStreamWriter writer(dir / "streamed.ptm");
+  stream_map(map, 3, writer);
+  const PtmFile a = read_ptm_file(dir / "direct.ptm"), b = read_ptm_file(dir / "streamed.ptm");
+  const std::size_t texels = 37u * 5u;
+  const std::size_t rgb_at = texels * kPtmTerms;
+  ASSERT_EQ(a.data.size(), rgb_at + texels * 3);
+  ASSERT_EQ(b.data.size(), a.data.size());
+  for (std::size_t k = rgb_at; k < a.data.size(); ++k) {
+    ASSERT_EQ(int{a.data[k]}, int{b.data[k]}) << "colour value " << (k - rgb_at);
+  }
+}
+
 }  // namespace
 }  // namespace ptmkit::texture

@@ -97,8 +97,8 @@ struct FitOptions {
 };
 
 // Residuals of the fit against its own input samples, in 8-bit grey levels (1/255 of full
-// scale), over every sample of every channel of the rows sampled: every row up to 2^18
-// texels, every row_step-th row above (a fixed choice, so reports are reproducible; 2^18
+// scale), over every sample of every channel of the rows sampled: every row up to 2^16
+// texels, every row_step-th row above (a fixed choice, so reports are reproducible; 2^16
 // texels x N lights x channels is millions of samples, plenty for these statistics).
 struct ResidualStats {
   double rms_grey = 0.0;
