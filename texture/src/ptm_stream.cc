@@ -600,15 +600,6 @@ void PtmStreamWriter::end() {
   });
   tbb::combinable<std::vector<std::uint32_t>> counts(
       [] { return std::vector<std::uint32_t>(kPtmTerms * kHalves, 0); });
-  // Where plane p's term i sits among a texel's halfs.
-  auto half_index = [&](int p, int i) {
-    if (s.model == ColourModel::kYCC) return i < kPtmTerms - 1 ? i : kPtmTerms - 1 + p;
-    return p * kPtmTerms + i;
-  };
-  std::array<int, 3 * kPtmTerms> half_at{};  // plane p's term i: half_at[p * 6 + i]
-  for (int p = 0; p < np; ++p) {
-    for (int i = 0; i < kPtmTerms; ++i) half_at[p * kPtmTerms + i] = half_index(p, i);
-  }
   // The relit error needs only the sample and the quantisation: it runs beside the encoding,
   // whose in-order writing leaves a core idle part of the time.
   PtmWriteReport relit_report;
@@ -697,24 +688,36 @@ void PtmStreamWriter::end() {
         std::uint8_t* b = buf.bytes.data() + static_cast<std::size_t>(jr) * w * kPtmTerms;
         // Texel by texel, each of its coefficients in turn: the halfs are read in order, and
         // a run of equal values (smooth regions) does not chain one count update to the next.
-        const auto encode = [&](auto planes) {
+        // Where plane p's term i sits among a texel's halfs is known at compile time (kRGB
+        // and kLRGB: p * 6 + i; kYCC shares a0..a4, then a5 per plane): a table of positions
+        // read per coefficient had been reloaded after every byte store (a byte store may
+        // alias anything), as had the table pointer.
+        const std::uint8_t* const table = byte_of.data();
+        const auto encode = [&](auto planes, auto shared) {
           constexpr int kPlanes = decltype(planes)::value;
+          constexpr bool kShared = decltype(shared)::value;
+          constexpr std::size_t kHalfsPerTexel =
+              kShared ? kPtmTerms + 2 : std::size_t{kPlanes} * kPtmTerms;
           for (std::size_t x = 0; x < w; ++x) {
-            const std::uint16_t* hx = h + x * hpt;
+            const std::uint16_t* hx = h + x * kHalfsPerTexel;
             for (int p = 0; p < kPlanes; ++p) {
               std::uint8_t* bx = b + p * plane_bytes + x * kPtmTerms;
               for (int i = 0; i < kPtmTerms; ++i) {
-                const std::uint16_t v = hx[half_at[p * kPtmTerms + i]];
-                bx[i] = byte_of[i * kHalves + v];
+                const int at =
+                    kShared ? (i < kPtmTerms - 1 ? i : kPtmTerms - 1 + p) : p * kPtmTerms + i;
+                const std::uint16_t v = hx[at];
+                bx[i] = table[i * kHalves + v];
                 ++count[i * kHalves + v];
               }
             }
           }
         };
-        if (np == 3) {
-          encode(std::integral_constant<int, 3>{});
+        if (s.model == ColourModel::kYCC) {
+          encode(std::integral_constant<int, 3>{}, std::true_type{});
+        } else if (np == 3) {
+          encode(std::integral_constant<int, 3>{}, std::false_type{});
         } else {
-          encode(std::integral_constant<int, 1>{});
+          encode(std::integral_constant<int, 1>{}, std::false_type{});
         }
       }
       if (s.format == PtmFormat::kLRGB) {
