@@ -17,10 +17,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_group.h>
-#include <chrono>
-#include <condition_variable>
-#include <mutex>
-#include <thread>
 
 #include "ptm_internal.h"
 #include "ptmkit/core/atomic_file.h"
@@ -177,47 +173,6 @@ struct Fd {
   ~Fd() {
     if (fd >= 0) ::close(fd);
   }
-};
-
-// Starts the kernel's writeback of a file while it is being written, from a thread of its
-// own. Renaming a new file over an old one makes ext4 (auto_da_alloc) submit all of the new
-// file's dirty pages first, in the renaming thread: 40-50 ms for a 12-megapixel LRGB .ptm,
-// with the process waiting at its very end. Pages already under writeback cost the rename
-// nothing. SYNC_FILE_RANGE_WRITE only submits the I/O; nothing here waits for the disk.
-class BackgroundWriteback {
- public:
-  explicit BackgroundWriteback(int fd) : fd_(fd) {
-#ifdef __linux__
-    thread_ = std::thread([this] {
-      std::unique_lock lock(mutex_);
-      while (!done_) {
-        wake_.wait_for(lock, std::chrono::milliseconds(20));
-        lock.unlock();
-        ::sync_file_range(fd_, 0, 0, SYNC_FILE_RANGE_WRITE);
-        lock.lock();
-      }
-    });
-#endif
-  }
-  BackgroundWriteback(const BackgroundWriteback&) = delete;
-  BackgroundWriteback& operator=(const BackgroundWriteback&) = delete;
-  ~BackgroundWriteback() { finish(); }
-  // Stops the thread once every written page has been submitted.
-  void finish() {
-    {
-      const std::lock_guard lock(mutex_);
-      done_ = true;
-    }
-    wake_.notify_one();
-    if (thread_.joinable()) thread_.join();
-  }
-
- private:
-  int fd_;
-  std::mutex mutex_;
-  std::condition_variable wake_;
-  bool done_ = false;
-  std::thread thread_;
 };
 
 // A whole image's worth of bytes (the half floats, LRGB's colours) in anonymous memory: the
@@ -745,13 +700,11 @@ void PtmStreamWriter::end() {
                    data0 + texels * kPtmTerms + static_cast<std::size_t>(buf.j0) * w * 3, path_);
       }
     };
-    BackgroundWriteback writeback(fd.fd);
     tbb::parallel_pipeline(
         kTokens,
         tbb::make_filter<void, Slice*>(tbb::filter_mode::serial_in_order, read_slice) &
             tbb::make_filter<Slice*, Slice*>(tbb::filter_mode::parallel, encode_slice) &
             tbb::make_filter<Slice*, void>(tbb::filter_mode::serial_in_order, write_slice));
-    writeback.finish();
     if (::close(fd.fd) != 0) {
       fd.fd = -1;
       throw Error(where(path_) + ": write failed: " + std::strerror(errno));
