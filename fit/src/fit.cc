@@ -56,9 +56,10 @@ struct RowStats {
     ++count;
     ++hist[bin(a)];
   }
-  // n residuals at once (a sampled row of the shared-matrix fit: most of a large fit's
-  // statistics). The sums run in 8 lanes, combined in a fixed order: the same totals whatever
-  // the threads, and about 4x faster than add() per sample.
+  // n residuals at once (an image's row of a sampled row, in the shared-matrix fit). The sums
+  // run in 8 lanes combined in a fixed order (the same totals whatever the threads), and the
+  // bins come from a loop of their own, which vectorises: a division per sample in add() had
+  // been 3% of a 12-megapixel fit's CPU.
   void add_all(const float* r, std::size_t n) {
     double sq[8] = {}, ab[8] = {}, mx[8] = {};
     std::size_t k = 0;

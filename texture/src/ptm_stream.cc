@@ -98,8 +98,9 @@ void colour_bytes(const float* in, std::size_t n, std::uint8_t* out) {
 constexpr float kHalfLimit = 65520.0f;
 
 // Per coefficient index (position mod 6 of a kRGB or kLRGB band), the smallest and largest
-// value; false if any is NaN, infinite or beyond half range. Both paths give the same answer
-// (a minimum or maximum does not depend on the order it is taken in; a zero is made +0).
+// value, and whether every value is finite and within half range. Both paths below give the
+// same answer: a minimum or maximum does not depend on the order it is taken in (but for the
+// sign of a zero bound, which write_rows makes +0).
 struct Range {
   std::array<float, kPtmTerms> lo, hi;
   bool finite = true;
