@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Whole-fit benchmark: a generated 49-image, 12-megapixel JPEG stack (rendered once by
 # `ptmkit synth`), decode-only time through the same reader (at its fastest band size), then
-# `ptmkit fit` (LRGB and RGB), each the median of 3 runs, with peak resident memory. Figures go
-# in docs/PERFORMANCE.md.
-# Usage: scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench, 2 threads)
+# `ptmkit fit` (LRGB and RGB), interleaved, medians of RUNS runs, with peak resident memory.
+# Figures go in docs/PERFORMANCE.md.
+# Usage: [RUNS=N] scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench,
+# 2 threads, 3 runs)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -19,29 +20,38 @@ if [ ! -f "$stack/lights.lp" ]; then
     --no-truth --lights dome49 --seed 3
 fi
 
-# Runs a command 3 times; prints "median_wall_s max_rss_mib".
-measure() {
-  local walls=() rss=0
-  for _ in 1 2 3; do
-    /usr/bin/time -f "%e %M" -o "$work/time.txt" "$@" >/dev/null
-    read -r wall kib <"$work/time.txt"
-    walls+=("$wall")
-    [ "$kib" -gt "$rss" ] && rss=$kib
-  done
-  local median
-  median=$(printf '%s\n' "${walls[@]}" | sort -n | sed -n 2p)
-  echo "$median $((rss / 1024))"
+# The three commands run interleaved (decode, lrgb, rgb, decode, ...) RUNS times (default 3):
+# on a shared machine, whose speed drifts, interleaving keeps the ratios fair. Each figure is
+# the median wall time (with the range), and the peak resident memory over the runs.
+runs="${RUNS:-3}"
+rm -f "$work"/decode.times "$work"/lrgb.times "$work"/rgb.times
+run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
+  local out="$1"
+  shift
+  /usr/bin/time -f "%e %M" -o "$work/time.txt" "$@" >/dev/null
+  cat "$work/time.txt" >>"$out"
+}
+# Prints "median_wall_s min max peak_rss_mib" of a times file.
+summary() {
+  sort -n "$1" | awk '{w[NR] = $1; if ($2 > m) m = $2}
+    END {printf "%s %s %s %d\n", w[int((NR + 1) / 2)], w[1], w[NR], m / 1024}'
 }
 
 pixels=$((4000 * 3000))
 decoded_mib=$((49 * pixels * 3 / 1024 / 1024))
-echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads"
-read -r dec_s dec_mib < <(measure "$build/bench/decode_stack" "$stack/lights.lp" "$threads")
-echo "decode only          : ${dec_s} s, peak ${dec_mib} MiB"
+echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs"
+for _ in $(seq "$runs"); do
+  run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
+  for fmt in lrgb rgb; do
+    run_once "$work/$fmt.times" "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
+      --format "$fmt" --threads "$threads"
+  done
+done
+read -r dec_s dec_lo dec_hi dec_mib < <(summary "$work/decode.times")
+echo "decode only          : ${dec_s} s (${dec_lo}-${dec_hi}), peak ${dec_mib} MiB"
 for fmt in lrgb rgb; do
-  read -r fit_s fit_mib < <(measure "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
-    --format "$fmt" --threads "$threads")
+  read -r fit_s fit_lo fit_hi fit_mib < <(summary "$work/$fmt.times")
   ratio=$(awk "BEGIN{printf \"%.2f\", $fit_s/$dec_s}")
   frac=$(awk "BEGIN{printf \"%.3f\", $fit_mib/$decoded_mib}")
-  echo "ptmkit fit --format $fmt : ${fit_s} s (${ratio}x decode), peak ${fit_mib} MiB (${frac} of decoded stack)"
+  echo "ptmkit fit --format $fmt : ${fit_s} s (${fit_lo}-${fit_hi}; ${ratio}x decode), peak ${fit_mib} MiB (${frac} of decoded stack)"
 done
