@@ -485,7 +485,9 @@ TEST(PtmStream, MatchesWritePtmWithinHalfFloatRounding) {
   test::ScratchDir dir;
   for (const ColourModel model : {ColourModel::kRGB, ColourModel::kLRGB, ColourModel::kYCC}) {
     SCOPED_TRACE(std::string(to_string(model)));
-    const CoefficientMap map = smooth_map(40, 30, model);
+    // Rows for three of the writer's slices, each many pages wide: the writer frees a slice's
+    // memory once it is encoded, and must free no other slice's.
+    const CoefficientMap map = smooth_map(200, 150, model);
     const fs::path direct = dir / "direct.ptm", streamed = dir / "streamed.ptm";
     const PtmWriteReport direct_report = write_ptm(direct, map);
     PtmStreamWriter writer(streamed);
