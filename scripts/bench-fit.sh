@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Whole-fit benchmark: a generated 49-image, 12-megapixel JPEG stack (rendered once by
 # `ptmkit synth`), decode-only time through the same reader (at its fastest band size), then
-# `ptmkit fit` (LRGB and RGB), interleaved, medians of RUNS runs, with peak resident memory.
+# `ptmkit fit` (LRGB and RGB; to a new file and over an existing one), interleaved, medians of
+# RUNS runs, with peak resident memory.
 # Figures go in docs/PERFORMANCE.md.
 # Usage: [RUNS=N] scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench,
 # 2 threads, 3 runs)
@@ -20,11 +21,16 @@ if [ ! -f "$stack/lights.lp" ]; then
     --no-truth --lights dome49 --seed 3
 fi
 
-# The three commands run interleaved (decode, lrgb, rgb, decode, ...) RUNS times (default 3):
-# on a shared machine, whose speed drifts, interleaving keeps the ratios fair. Each figure is
-# the median wall time (with the range), and the peak resident memory over the runs.
+# The commands run interleaved (decode, lrgb, rgb, decode, ...) RUNS times (default 3): on a
+# shared machine, whose speed drifts, interleaving keeps the ratios fair. Each fit runs twice:
+# first to a new output file (the previous run's output is removed before the timer starts, as
+# for a first fit of a capture), then again over that file (replacing an existing output: the
+# file system then also frees the old file, and ext4 starts writing the new one back when it
+# is renamed over the old). Each figure is the median wall time (with the range), and the
+# peak resident memory over the runs.
 runs="${RUNS:-3}"
-rm -f "$work"/decode.times "$work"/lrgb.times "$work"/rgb.times
+kinds="decode lrgb rgb lrgb-replace rgb-replace"
+for kind in $kinds; do rm -f "$work/$kind.times"; done
 run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
   local out="$1"
   shift
@@ -43,15 +49,21 @@ echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; thre
 for _ in $(seq "$runs"); do
   run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
   for fmt in lrgb rgb; do
-    run_once "$work/$fmt.times" "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
-      --format "$fmt" --threads "$threads"
+    rm -f "$work/out-$fmt.ptm"
+    for kind in "$fmt" "$fmt-replace"; do
+      run_once "$work/$kind.times" "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
+        --format "$fmt" --threads "$threads"
+    done
   done
 done
 read -r dec_s dec_lo dec_hi dec_mib < <(summary "$work/decode.times")
-echo "decode only          : ${dec_s} s (${dec_lo}-${dec_hi}), peak ${dec_mib} MiB"
-for fmt in lrgb rgb; do
-  read -r fit_s fit_lo fit_hi fit_mib < <(summary "$work/$fmt.times")
+echo "decode only                  : ${dec_s} s (${dec_lo}-${dec_hi}), peak ${dec_mib} MiB"
+for kind in lrgb rgb lrgb-replace rgb-replace; do
+  read -r fit_s fit_lo fit_hi fit_mib < <(summary "$work/$kind.times")
   ratio=$(awk "BEGIN{printf \"%.2f\", $fit_s/$dec_s}")
   frac=$(awk "BEGIN{printf \"%.3f\", $fit_mib/$decoded_mib}")
-  echo "ptmkit fit --format $fmt : ${fit_s} s (${fit_lo}-${fit_hi}; ${ratio}x decode), peak ${fit_mib} MiB (${frac} of decoded stack)"
+  what="new file"
+  case "$kind" in *-replace) what="over the last" ;; esac
+  printf 'ptmkit fit --format %-4s (%s): %s s (%s-%s; %sx decode), peak %s MiB (%s of decoded stack)\n' \
+    "${kind%-replace}" "$what" "$fit_s" "$fit_lo" "$fit_hi" "$ratio" "$fit_mib" "$frac"
 done

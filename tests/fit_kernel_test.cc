@@ -1,6 +1,6 @@
 // The fit's kernels: the run-time-chosen paths (AVX2/FMA where the CPU has it) give the same
-// bits as the portable ones; the product matches double precision, and 8-bit samples become
-// exactly v / 255.
+// bits as the portable ones; the product matches double precision; 8-bit samples become exactly
+// v / 255, and 255 times that is v again, so the byte paths give the float paths' bits.
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -27,22 +27,24 @@ TEST(PinvKernel, DispatchedAndPortablePathsGiveTheSameBitsAndMatchDouble) {
           s(static_cast<std::size_t>(n * stride));
       for (float& v : p) v = u(rng);
       for (float& v : s) v = 0.5f * (u(rng) + 1.0f);
-      std::vector<float> fast(static_cast<std::size_t>(6 * m)), portable(fast.size());
-      internal::apply_pinv(p.data(), n, s.data(), stride, m, fast.data());
-      internal::apply_pinv_portable(p.data(), n, s.data(), stride, m, portable.data());
-      ASSERT_EQ(fast, portable) << "n " << n << " m " << m;
-      double worst = 0.0;
-      for (std::ptrdiff_t j = 0; j < m; ++j) {
-        for (int k = 0; k < 6; ++k) {
-          double ref = 0.0;
-          for (int i = 0; i < n; ++i) {
-            ref += static_cast<double>(p[static_cast<std::size_t>(i * 6 + k)]) *
-                   s[static_cast<std::size_t>(i * stride + j)];
+      for (const float scale : {1.0f, 255.0f}) {
+        std::vector<float> fast(static_cast<std::size_t>(6 * m)), portable(fast.size());
+        internal::apply_pinv(p.data(), n, s.data(), stride, m, fast.data(), scale);
+        internal::apply_pinv_portable(p.data(), n, s.data(), stride, m, portable.data(), scale);
+        ASSERT_EQ(fast, portable) << "n " << n << " m " << m << " scale " << scale;
+        double worst = 0.0;
+        for (std::ptrdiff_t j = 0; j < m; ++j) {
+          for (int k = 0; k < 6; ++k) {
+            double ref = 0.0;
+            for (int i = 0; i < n; ++i) {
+              ref += static_cast<double>(p[static_cast<std::size_t>(i * 6 + k)]) * scale *
+                     s[static_cast<std::size_t>(i * stride + j)];
+            }
+            worst = std::max(worst, std::abs(ref - fast[static_cast<std::size_t>(j * 6 + k)]));
           }
-          worst = std::max(worst, std::abs(ref - fast[static_cast<std::size_t>(j * 6 + k)]));
         }
+        EXPECT_LT(worst, 1e-5 * n * scale) << "n " << n << " m " << m << " scale " << scale;
       }
-      EXPECT_LT(worst, 1e-5 * n) << "n " << n << " m " << m;
     }
   }
 }
@@ -55,6 +57,16 @@ TEST(UnitBytes, EveryByteIsTheCorrectlyRoundedQuotient) {
   internal::bytes_to_unit(in.data(), in.size(), out.data());
   for (std::size_t k = 0; k < in.size(); ++k) {
     ASSERT_EQ(out[k], static_cast<float>(in[k]) / 255.0f) << "byte " << int{in[k]};
+  }
+}
+
+// What lets the 8-bit paths skip the division: for every byte, 255 * (v / 255) in float (each
+// step rounded) is v again.
+TEST(UnitBytes, TimesTwoHundredFiftyFiveIsTheByteAgain) {
+  for (int v = 0; v < 256; ++v) {
+    const float unit = static_cast<float>(v) / 255.0f;
+    const float back = 255.0f * unit;
+    ASSERT_EQ(back, static_cast<float>(v)) << "byte " << v;
   }
 }
 
@@ -73,14 +85,15 @@ TEST(PinvKernel, BytesGiveTheBitsOfConvertingFirst) {
       internal::bytes_to_unit(b.data(), b.size(), f.data());
       std::vector<float> direct(static_cast<std::size_t>(6 * m)), converted(direct.size());
       internal::apply_pinv_u8(p.data(), n, b.data(), stride, m, direct.data());
-      internal::apply_pinv(p.data(), n, f.data(), stride, m, converted.data());
+      internal::apply_pinv(p.data(), n, f.data(), stride, m, converted.data(), 255.0f);
       ASSERT_EQ(direct, converted) << "n " << n << " m " << m;
     }
   }
 }
 
-// The one-pass LRGB row on bytes against its definition: convert, luma image by image, then
-// the product on the lumas. Widths around the 8-texel block, the images strided as a band's.
+// The one-pass LRGB row on bytes against its definition: convert, luma image by image in
+// 0..255 units, then the product on the lumas. Widths around the 8-texel block, the images
+// strided as a band's.
 TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
   std::mt19937_64 rng(test::test_seed());
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -98,8 +111,8 @@ TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
       std::vector<float> f(3 * nw), y(static_cast<std::size_t>(n) * nw), sums(4 * nw, 0.0f);
       for (int i = 0; i < n; ++i) {
         internal::bytes_to_unit(b.data() + i * stride, f.size(), f.data());
-        internal::luma_lrgb_row(f.data(), w, y.data() + i * nw, &sums[0], &sums[nw], &sums[2 * nw],
-                                &sums[3 * nw]);
+        internal::luma_lrgb_row(f.data(), w, 255.0f, y.data() + i * nw, &sums[0], &sums[nw],
+                                &sums[2 * nw], &sums[3 * nw]);
       }
       std::vector<float> coeffs(6 * nw);
       internal::apply_pinv(p.data(), n, y.data(), w, w, coeffs.data());

@@ -184,6 +184,7 @@ class BandFitter {
         residual_row_step_(residual_row_step(width, height)),
         near_(near) {
     a_f_ = design.design().cast<float>();
+    pinv_f255_ = (design.pseudo_inverse() / 255.0).cast<float>();
     const auto n = design.design().rows();
     light_.resize(n, 3);
     for (Eigen::Index i = 0; i < n; ++i) {
@@ -232,20 +233,23 @@ class BandFitter {
   }
 
  private:
-  // P (6 x N) times a sample matrix (N x M) into a 6 x M column-major output.
+  // How apply() takes its samples in float precision: as they are (times P), or in 0..255
+  // units (times P / 255), either scaled from 0..1 on the way or already so (LRGB's lumas).
+  enum class Units { kAsIs, kScaleTo255, kIn255 };
+
+  // P (6 x N) times a sample matrix (N x M) into a 6 x M column-major output. Double precision
+  // takes every sample as it is (kAsIs only).
   template <class Samples>
-  void apply(const Samples& s, float* out, Eigen::Index m) const {
+  void apply(const Samples& s, float* out, Eigen::Index m, Units units = Units::kAsIs) const {
     CoeffMap c(out, kPtmTerms, m);
     if (options_.precision == Precision::kDouble) {
       c = (design_.pseudo_inverse() * s.template cast<double>()).template cast<float>();
-    } else if constexpr (std::is_same_v<Samples, SampleMap> ||
-                         std::is_same_v<Samples, Eigen::Map<const RowMajorF>>) {
-      internal::apply_pinv(design_.pseudo_inverse_f().data(),
-                           static_cast<int>(design_.pseudo_inverse_f().cols()), s.data(),
-                           static_cast<std::ptrdiff_t>(s.outerStride()), m, out);
-    } else {
-      c.noalias() = design_.pseudo_inverse_f() * s;
+      return;
     }
+    const Eigen::MatrixXf& p = units == Units::kAsIs ? design_.pseudo_inverse_f() : pinv_f255_;
+    const float scale = units == Units::kScaleTo255 ? 255.0f : 1.0f;
+    internal::apply_pinv(p.data(), static_cast<int>(p.cols()), s.data(),
+                         static_cast<std::ptrdiff_t>(s.outerStride()), m, out, scale);
   }
 
   void fit_row(const StackBand& band, int r, float* c_out, float* col_out, RowStats* st) const {
@@ -288,7 +292,7 @@ class BandFitter {
   void fit_row_bytes(const StackBand& band, int r, float* c_out, float* col_out) const {
     const int w = width_;
     const std::size_t row_offset = static_cast<std::size_t>(r) * w * 3;
-    const auto& p = design_.pseudo_inverse_f();
+    const auto& p = pinv_f255_;  // the bytes are the samples in 0..255 units
     const std::uint8_t* first = band.image_u8(0) + row_offset;
     const auto stride = static_cast<std::ptrdiff_t>(band.image_stride());
     if (options_.model == ColourModel::kRGB) {
@@ -313,9 +317,13 @@ class BandFitter {
     const int n = static_cast<int>(samples.rows());
     const int w = width_;
     const int ch = channels_;
+    // Float precision fits colour samples in 0..255 units, as the 8-bit path does (the same
+    // bits for 8-bit images, whichever way they were read).
+    const bool float_colour = ch == 3 && options_.precision == Precision::kFloat;
     if (options_.model == ColourModel::kRGB) {
       if (ch == 3) {
-        apply(samples, c_out, static_cast<Eigen::Index>(w) * 3);
+        apply(samples, c_out, static_cast<Eigen::Index>(w) * 3,
+              float_colour ? Units::kScaleTo255 : Units::kAsIs);
         return;
       }
       // Grey input: the same polynomial for R, G and B.
@@ -365,7 +373,7 @@ class BandFitter {
           continue;
         }
         if (lrgb) {
-          internal::luma_lrgb_row(s, cw, yi, s0, s1, s2, s3);
+          internal::luma_lrgb_row(s, cw, float_colour ? 255.0f : 1.0f, yi, s0, s1, s2, s3);
         } else {
           internal::luma_ycc_row(s, cw, yi, s0, s1, s2);
         }
@@ -377,7 +385,7 @@ class BandFitter {
         if (!lrgb) std::fill_n(s0, 3 * static_cast<std::size_t>(cw), 0.0f);
       }
       float* c_chunk = c_out + static_cast<std::ptrdiff_t>(x0) * kPtmTerms;
-      apply(y, c_chunk, cw);
+      apply(y, c_chunk, cw, lrgb && float_colour ? Units::kIn255 : Units::kAsIs);
       for (int x = 0; x < cw; ++x) {
         float* col = col_out + static_cast<std::ptrdiff_t>(x0 + x) * ncol;
         if (lrgb) {
@@ -780,6 +788,10 @@ class BandFitter {
   bool srgb_ = false;
   int residual_row_step_;
   Eigen::MatrixXf a_f_;
+  // The pseudo-inverse over 255 (rounded once, from double): the float fit of colour samples
+  // works in 0..255 units, where an 8-bit sample is its byte value and needs no division (see
+  // internal::apply_pinv).
+  Eigen::MatrixXf pinv_f255_;
   Eigen::MatrixX3d light_;  // unit light directions (for normals)
   bool robust_ = false;
   bool extras_ = false;

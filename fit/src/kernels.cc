@@ -28,15 +28,19 @@ constexpr std::ptrdiff_t kAhead = 512;  // software prefetch distance in bytes (
 // faster (bench/kernel_benchmark), and none at all 1.6x slower.
 constexpr std::ptrdiff_t kAheadLrgb = 256;
 
-// Columns [j0, j0 + count) with count <= kBlock, portable.
+// Columns [j0, j0 + count) with count <= kBlock, portable; each sample times `scale` (rounded
+// to float; exact when scale is 1) before its fused multiply-add.
 void block_portable(const float* p, int n, const float* s, std::ptrdiff_t stride, std::ptrdiff_t j0,
-                    std::ptrdiff_t count, float* out) {
+                    std::ptrdiff_t count, float* out, float scale = 1.0f) {
   float acc[kTerms][kBlock] = {};
   for (int i = 0; i < n; ++i) {
     const float* row = s + static_cast<std::ptrdiff_t>(i) * stride + j0;
     const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
     for (int k = 0; k < kTerms; ++k) {
-      for (std::ptrdiff_t t = 0; t < count; ++t) acc[k][t] = std::fma(pi[k], row[t], acc[k][t]);
+      for (std::ptrdiff_t t = 0; t < count; ++t) {
+        const float v = scale * row[t];
+        acc[k][t] = std::fma(pi[k], v, acc[k][t]);
+      }
     }
   }
   for (std::ptrdiff_t t = 0; t < count; ++t) {
@@ -44,7 +48,8 @@ void block_portable(const float* p, int n, const float* s, std::ptrdiff_t stride
   }
 }
 
-// block_portable on 8-bit samples: the block converted to floats (v / 255), then the same sums.
+// block_portable on 8-bit samples: the block converted to floats (the values themselves,
+// exact), then the same sums.
 void block_portable_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
                        std::ptrdiff_t j0, std::ptrdiff_t count, float* out) {
   thread_local std::vector<float> unit;
@@ -52,7 +57,7 @@ void block_portable_u8(const float* p, int n, const std::uint8_t* s, std::ptrdif
   for (int i = 0; i < n; ++i) {
     for (std::ptrdiff_t t = 0; t < count; ++t) {
       unit[static_cast<std::size_t>(i * kBlock + t)] =
-          static_cast<float>(s[static_cast<std::ptrdiff_t>(i) * stride + j0 + t]) / 255.0f;
+          static_cast<float>(s[static_cast<std::ptrdiff_t>(i) * stride + j0 + t]);
     }
   }
   // Columns j0.. of `out` from columns 0.. of `unit`.
@@ -85,20 +90,21 @@ __attribute__((target("avx2,fma"))) inline void store_block(const __m256* a0, co
 
 __attribute__((target("avx2,fma"))) void apply_avx2(const float* p, int n, const float* s,
                                                     std::ptrdiff_t stride, std::ptrdiff_t m,
-                                                    float* out) {
+                                                    float* out, float scale) {
+  const __m256 k = _mm256_set1_ps(scale);
   std::ptrdiff_t j = 0;
   for (; j + kBlock <= m; j += kBlock) {
     __m256 a0[kTerms], a1[kTerms];
-    for (int k = 0; k < kTerms; ++k) a0[k] = a1[k] = _mm256_setzero_ps();
+    for (int t = 0; t < kTerms; ++t) a0[t] = a1[t] = _mm256_setzero_ps();
     for (int i = 0; i < n; ++i) {
       const float* row = s + static_cast<std::ptrdiff_t>(i) * stride + j;
-      const __m256 x0 = _mm256_loadu_ps(row);
-      const __m256 x1 = _mm256_loadu_ps(row + 8);
+      const __m256 x0 = _mm256_mul_ps(k, _mm256_loadu_ps(row));
+      const __m256 x1 = _mm256_mul_ps(k, _mm256_loadu_ps(row + 8));
       accumulate(p + static_cast<std::ptrdiff_t>(i) * kTerms, x0, x1, a0, a1);
     }
     store_block(a0, a1, out + j * kTerms);
   }
-  if (j < m) block_portable(p, n, s, stride, j, m - j, out);
+  if (j < m) block_portable(p, n, s, stride, j, m - j, out, scale);
 }
 
 // v / 255 for 8 integers 0..255, correctly rounded: q = v * (1/255) is off by an ulp for about
@@ -113,9 +119,10 @@ __attribute__((target("avx2,fma"))) inline __m256 unit8_fma(__m256i v_i32) {
   return _mm256_fmadd_ps(e, inv, q);
 }
 
-// apply_avx2 on 8-bit samples, converted in registers as bytes_to_unit converts them: the
-// same floats into the same fused multiply-adds, so the same bits as converting the band
-// first, without writing and re-reading four bytes per sample.
+// apply_avx2 on 8-bit samples, each converted in registers to its value (exact): the same
+// floats as 255 * (v / 255) into the same fused multiply-adds, so the same bits as apply_avx2
+// at scale 255 on the band converted to 0..1 floats, without writing and re-reading four bytes
+// per sample or dividing by 255.
 __attribute__((target("avx2,fma"))) void apply_avx2_u8(const float* p, int n, const std::uint8_t* s,
                                                        std::ptrdiff_t stride, std::ptrdiff_t m,
                                                        float* out) {
@@ -130,8 +137,8 @@ __attribute__((target("avx2,fma"))) void apply_avx2_u8(const float* p, int n, co
       const std::uint8_t* row = s + static_cast<std::ptrdiff_t>(i) * stride + j;
       if (fetch) _mm_prefetch(reinterpret_cast<const char*>(row + kAhead), _MM_HINT_T0);
       const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row));
-      const __m256 x0 = unit8_fma(_mm256_cvtepu8_epi32(b));
-      const __m256 x1 = unit8_fma(_mm256_cvtepu8_epi32(_mm_srli_si128(b, 8)));
+      const __m256 x0 = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(b));
+      const __m256 x1 = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_srli_si128(b, 8)));
       accumulate(p + static_cast<std::ptrdiff_t>(i) * kTerms, x0, x1, a0, a1);
     }
     store_block(a0, a1, out + j * kTerms);
@@ -148,21 +155,21 @@ bool has_avx2_fma() {
 }  // namespace
 
 void apply_pinv_portable(const float* p, int n, const float* s, std::ptrdiff_t stride,
-                         std::ptrdiff_t m, float* out) {
+                         std::ptrdiff_t m, float* out, float scale) {
   for (std::ptrdiff_t j = 0; j < m; j += kBlock) {
-    block_portable(p, n, s, stride, j, std::min(kBlock, m - j), out);
+    block_portable(p, n, s, stride, j, std::min(kBlock, m - j), out, scale);
   }
 }
 
 void apply_pinv(const float* p, int n, const float* s, std::ptrdiff_t stride, std::ptrdiff_t m,
-                float* out) {
+                float* out, float scale) {
 #ifdef PTMKIT_PINV_X86
   if (has_avx2_fma()) {
-    apply_avx2(p, n, s, stride, m, out);
+    apply_avx2(p, n, s, stride, m, out, scale);
     return;
   }
 #endif
-  apply_pinv_portable(p, n, s, stride, m, out);
+  apply_pinv_portable(p, n, s, stride, m, out, scale);
 }
 
 void apply_pinv_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
@@ -193,11 +200,11 @@ __attribute__((target("avx2,fma"))) void bytes_to_unit_fma(const std::uint8_t* i
   for (; k < count; ++k) out[k] = static_cast<float>(in[k]) / 255.0f;
 }
 
-// Eight texels of 8-bit RGB, interleaved, to three vectors of v / 255: 24 bytes from s,
+// Eight texels of 8-bit RGB, interleaved, to three vectors of their values: 24 bytes from s,
 // read as two 16-byte loads at s and s + 8 (no byte past s + 23 is touched, so the last
 // texels of a buffer are safe), de-interleaved with byte shuffles.
-__attribute__((target("avx2,fma"))) inline void rgb8_unit(const std::uint8_t* s, __m256* r,
-                                                          __m256* g, __m256* b) {
+__attribute__((target("avx2,fma"))) inline void rgb8_values(const std::uint8_t* s, __m256* r,
+                                                            __m256* g, __m256* b) {
   const __m128i lo_mask = _mm_setr_epi8(0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, -1, -1, -1, -1);
   const __m128i hi_mask = _mm_setr_epi8(4, 7, 10, 13, 5, 8, 11, 14, 6, 9, 12, 15, -1, -1, -1, -1);
   const __m128i a = _mm_shuffle_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s)),
@@ -206,9 +213,9 @@ __attribute__((target("avx2,fma"))) inline void rgb8_unit(const std::uint8_t* s,
                                      hi_mask);  // R4-7 G4-7 B4-7 .
   const __m128i rg = _mm_unpacklo_epi32(a, c);  // R0-3 R4-7 G0-3 G4-7
   const __m128i bb = _mm_unpackhi_epi32(a, c);  // B0-3 B4-7 . .
-  *r = unit8_fma(_mm256_cvtepu8_epi32(rg));
-  *g = unit8_fma(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8)));
-  *b = unit8_fma(_mm256_cvtepu8_epi32(bb));
+  *r = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(rg));
+  *g = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_srli_si128(rg, 8)));
+  *b = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bb));
 }
 
 // lrgb_row_u8, 8 texels at a time; returns the texels done (a multiple of 8), the caller
@@ -236,7 +243,7 @@ __attribute__((target("avx2,fma"))) int lrgb_row_u8_avx2(const float* p, int n,
       const std::uint8_t* row = s + static_cast<std::ptrdiff_t>(i) * stride + at;
       if (fetch) _mm_prefetch(reinterpret_cast<const char*>(row + kAheadLrgb), _MM_HINT_T0);
       __m256 r, g, b;
-      rgb8_unit(row, &r, &g, &b);
+      rgb8_values(row, &r, &g, &b);
       const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
                                      _mm256_mul_ps(kb, b));
       yy = _mm256_add_ps(yy, _mm256_mul_ps(l, l));
@@ -277,16 +284,19 @@ void bytes_to_unit(const std::uint8_t* in, std::size_t count, float* out) {
 // Compiled for AVX2 and for the baseline, chosen at run time; element-wise float operations
 // in a fixed order, so both give the same bits.
 __attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float* s, int w,
-                                                                     float* yi, float* s0,
-                                                                     float* s1, float* s2,
-                                                                     float* s3) {
+                                                                     float scale, float* yi,
+                                                                     float* s0, float* s1,
+                                                                     float* s2, float* s3) {
   for (int x = 0; x < w; ++x) {
-    const float l = kLumaRf * s[3 * x] + kLumaGf * s[3 * x + 1] + kLumaBf * s[3 * x + 2];
+    const float r = scale * s[3 * x];
+    const float g = scale * s[3 * x + 1];
+    const float b = scale * s[3 * x + 2];
+    const float l = kLumaRf * r + kLumaGf * g + kLumaBf * b;
     yi[x] = l;
     s0[x] += l * l;
-    s1[x] += l * s[3 * x];
-    s2[x] += l * s[3 * x + 1];
-    s3[x] += l * s[3 * x + 2];
+    s1[x] += l * r;
+    s2[x] += l * g;
+    s3[x] += l * b;
   }
 }
 
@@ -312,9 +322,9 @@ void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptr
     float yy = 0.0f, yr = 0.0f, yg = 0.0f, yb = 0.0f;
     for (int i = 0; i < n; ++i) {
       const std::uint8_t* t = s + static_cast<std::ptrdiff_t>(i) * stride + 3 * x;
-      const float r = static_cast<float>(t[0]) / 255.0f;
-      const float g = static_cast<float>(t[1]) / 255.0f;
-      const float b = static_cast<float>(t[2]) / 255.0f;
+      const float r = t[0];
+      const float g = t[1];
+      const float b = t[2];
       const float l = kLumaRf * r + kLumaGf * g + kLumaBf * b;
       yy += l * l;
       yr += l * r;
