@@ -219,9 +219,9 @@ __attribute__((target("avx2,fma"))) inline void rgb8_values(const std::uint8_t* 
 }
 
 // lrgb_row_u8, 8 texels at a time; returns the texels done (a multiple of 8), the caller
-// finishes. Per block, image after image: the luma (separate multiplies and adds, as
-// luma_lrgb_row: the build forbids contraction), the four colour sums, and the product's
-// fused multiply-adds, all in registers: no luma row is written and read back.
+// finishes. Per block, image after image: the luma and the four colour sums (the fused
+// multiply-adds of luma_lrgb_texel), and the product's, all in registers: no luma row is
+// written and read back.
 __attribute__((target("avx2,fma"))) int lrgb_row_u8_avx2(const float* p, int n,
                                                          const std::uint8_t* s,
                                                          std::ptrdiff_t stride, int w,
@@ -244,12 +244,11 @@ __attribute__((target("avx2,fma"))) int lrgb_row_u8_avx2(const float* p, int n,
       if (fetch) _mm_prefetch(reinterpret_cast<const char*>(row + kAheadLrgb), _MM_HINT_T0);
       __m256 r, g, b;
       rgb8_values(row, &r, &g, &b);
-      const __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)),
-                                     _mm256_mul_ps(kb, b));
-      yy = _mm256_add_ps(yy, _mm256_mul_ps(l, l));
-      yr = _mm256_add_ps(yr, _mm256_mul_ps(l, r));
-      yg = _mm256_add_ps(yg, _mm256_mul_ps(l, g));
-      yb = _mm256_add_ps(yb, _mm256_mul_ps(l, b));
+      const __m256 l = _mm256_fmadd_ps(kb, b, _mm256_fmadd_ps(kg, g, _mm256_mul_ps(kr, r)));
+      yy = _mm256_fmadd_ps(l, l, yy);
+      yr = _mm256_fmadd_ps(l, r, yr);
+      yg = _mm256_fmadd_ps(l, g, yg);
+      yb = _mm256_fmadd_ps(l, b, yb);
       const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
       for (int k = 0; k < kTerms; ++k) {
         acc[k] = _mm256_fmadd_ps(_mm256_broadcast_ss(pi + k), l, acc[k]);
@@ -281,23 +280,47 @@ void bytes_to_unit(const std::uint8_t* in, std::size_t count, float* out) {
   for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(in[k]) / 255.0f;
 }
 
-// Compiled for AVX2 and for the baseline, chosen at run time; element-wise float operations
-// in a fixed order, so both give the same bits.
-__attribute__((target_clones("avx2", "default"))) void luma_lrgb_row(const float* s, int w,
-                                                                     float scale, float* yi,
-                                                                     float* s0, float* s1,
-                                                                     float* s2, float* s3) {
+namespace {
+
+// luma_lrgb_row's loop, for a caller compiled with or without FMA instructions: fused
+// multiply-adds in a fixed order (std::fma is exact either way), so both give the same bits.
+// The luma r kR + g kG + b kB as (r kR + g kG) + b kB, each addition fused: 2 of the 5
+// operations, and one per colour sum, saved over separate multiplies and adds.
+__attribute__((always_inline)) inline void luma_lrgb_loop(const float* s, int w, float scale,
+                                                          float* yi, float* s0, float* s1,
+                                                          float* s2, float* s3) {
   for (int x = 0; x < w; ++x) {
     const float r = scale * s[3 * x];
     const float g = scale * s[3 * x + 1];
     const float b = scale * s[3 * x + 2];
-    const float l = kLumaRf * r + kLumaGf * g + kLumaBf * b;
+    const float l = std::fma(kLumaBf, b, std::fma(kLumaGf, g, kLumaRf * r));
     yi[x] = l;
-    s0[x] += l * l;
-    s1[x] += l * r;
-    s2[x] += l * g;
-    s3[x] += l * b;
+    s0[x] = std::fma(l, l, s0[x]);
+    s1[x] = std::fma(l, r, s1[x]);
+    s2[x] = std::fma(l, g, s2[x]);
+    s3[x] = std::fma(l, b, s3[x]);
   }
+}
+
+#ifdef PTMKIT_PINV_X86
+__attribute__((target("avx2,fma"))) void luma_lrgb_row_fma(const float* s, int w, float scale,
+                                                           float* yi, float* s0, float* s1,
+                                                           float* s2, float* s3) {
+  luma_lrgb_loop(s, w, scale, yi, s0, s1, s2, s3);
+}
+#endif
+
+}  // namespace
+
+void luma_lrgb_row(const float* s, int w, float scale, float* yi, float* s0, float* s1, float* s2,
+                   float* s3) {
+#ifdef PTMKIT_PINV_X86
+  if (has_avx2_fma()) {
+    luma_lrgb_row_fma(s, w, scale, yi, s0, s1, s2, s3);
+    return;
+  }
+#endif
+  luma_lrgb_loop(s, w, scale, yi, s0, s1, s2, s3);
 }
 
 // The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
@@ -325,11 +348,11 @@ void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptr
       const float r = t[0];
       const float g = t[1];
       const float b = t[2];
-      const float l = kLumaRf * r + kLumaGf * g + kLumaBf * b;
-      yy += l * l;
-      yr += l * r;
-      yg += l * g;
-      yb += l * b;
+      const float l = std::fma(kLumaBf, b, std::fma(kLumaGf, g, kLumaRf * r));
+      yy = std::fma(l, l, yy);
+      yr = std::fma(l, r, yr);
+      yg = std::fma(l, g, yg);
+      yb = std::fma(l, b, yb);
       for (int k = 0; k < kTerms; ++k) acc[k] = std::fma(p[i * kTerms + k], l, acc[k]);
     }
     s0[x] = yy;

@@ -38,7 +38,7 @@ void bytes_to_unit(const std::uint8_t* in, std::size_t count, float* out);
 // One image's row of w RGB texels for the luminance models, each sample first multiplied by
 // `scale` (255 for the fit's 8-bit arithmetic, see apply_pinv): luma (Rec. 601 weights) into
 // yi, and the per-texel sums s0 += l * l, s1 += l * r, s2 += l * g, s3 += l * b that give
-// LRGB's colour. Float operations in a fixed order: the same bits on every dispatch path.
+// LRGB's colour. Fused multiply-adds in a fixed order: the same bits on every dispatch path.
 void luma_lrgb_row(const float* s, int w, float scale, float* yi, float* s0, float* s1, float* s2,
                    float* s3);
 
