@@ -21,19 +21,22 @@ if [ ! -f "$stack/lights.lp" ]; then
     --no-truth --lights dome49 --seed 3
 fi
 
-# The commands run interleaved (decode, lrgb, rgb, decode, ...) RUNS times (default 3): on a
+# The commands run interleaved, in rounds (decode; lrgb new, lrgb replacing; rgb new, rgb
+# replacing), RUNS rounds (default 3): on a
 # shared machine, whose speed drifts, interleaving keeps the ratios fair. Each fit runs twice:
-# first to a new output file (the previous run's output is removed before the timer starts, as
-# for a first fit of a capture), then again over that file (replacing an existing output: the
-# file system then also frees the old file, and ext4 starts writing the new one back when it
-# is renamed over the old). Each figure is the median wall time (with the range), and the
-# peak resident memory over the runs.
+# first to a new output file (the outputs of the round before are removed when a round starts,
+# as for a first fit of a capture), then again over that file (replacing an existing output:
+# the file system then also frees the old file, and ext4 starts writing the new one back when
+# it is renamed over the old). Every command starts after `sync`, so that no command's timing
+# includes the write-back of an earlier one's output. Each figure is the median wall time
+# (with the range), and the peak resident memory over the runs.
 runs="${RUNS:-3}"
 kinds="decode lrgb rgb lrgb-replace rgb-replace"
 for kind in $kinds; do rm -f "$work/$kind.times"; done
 run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
   local out="$1"
   shift
+  sync
   /usr/bin/time -f "%e %M" -o "$work/time.txt" "$@" >/dev/null
   cat "$work/time.txt" >>"$out"
 }
@@ -47,9 +50,9 @@ pixels=$((4000 * 3000))
 decoded_mib=$((49 * pixels * 3 / 1024 / 1024))
 echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs"
 for _ in $(seq "$runs"); do
+  rm -f "$work/out-lrgb.ptm" "$work/out-rgb.ptm"
   run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
   for fmt in lrgb rgb; do
-    rm -f "$work/out-$fmt.ptm"
     for kind in "$fmt" "$fmt-replace"; do
       run_once "$work/$kind.times" "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
         --format "$fmt" --threads "$threads"
