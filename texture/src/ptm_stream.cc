@@ -176,6 +176,16 @@ struct Fd {
   }
 };
 
+// The whole pages inside the bytes [begin, end) (addresses or file offsets): [lo, hi), none
+// when hi <= lo.
+struct PageSpan {
+  std::uintptr_t lo = 0, hi = 0;
+};
+PageSpan whole_pages(std::uintptr_t begin, std::uintptr_t end) {
+  const auto page = static_cast<std::uintptr_t>(::sysconf(_SC_PAGESIZE));
+  return {(begin + page - 1) / page * page, end / page * page};
+}
+
 // A whole image's worth of bytes (the half floats, LRGB's colours) in anonymous memory: the
 // kernel's zero pages, first touched by the band that fills them, while the next band
 // decodes, instead of an up-front fill on one thread. (Transparent huge pages were tried:
@@ -209,12 +219,9 @@ class LargeBuffer {
   // side stay.
   void discard(std::size_t first, std::size_t n) {
     if (data_ == nullptr || n == 0) return;
-    const auto page = static_cast<std::uintptr_t>(::sysconf(_SC_PAGESIZE));
-    const auto begin = reinterpret_cast<std::uintptr_t>(data_ + first);
-    const auto end = reinterpret_cast<std::uintptr_t>(data_ + first + n);
-    const std::uintptr_t lo = (begin + page - 1) / page * page;
-    const std::uintptr_t hi = end / page * page;
-    if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+    const PageSpan p = whole_pages(reinterpret_cast<std::uintptr_t>(data_ + first),
+                                   reinterpret_cast<std::uintptr_t>(data_ + first + n));
+    if (p.hi > p.lo) ::madvise(reinterpret_cast<void*>(p.lo), p.hi - p.lo, MADV_DONTNEED);
   }
   [[nodiscard]] T* data() { return data_; }
   [[nodiscard]] const T* data() const { return data_; }
@@ -265,12 +272,10 @@ void pread_all(int fd, void* data, std::size_t bytes, std::size_t offset,
 // Frees the whole pages of a file's bytes [offset, offset + bytes) that are no longer needed.
 // Only an economy: a file system without hole punching keeps them until the file is closed.
 void punch_hole(int fd, std::size_t offset, std::size_t bytes) {
-  const auto page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
-  const std::size_t lo = (offset + page - 1) / page * page;
-  const std::size_t hi = (offset + bytes) / page * page;
-  if (hi > lo) {
-    (void)::fallocate(fd, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, static_cast<off_t>(lo),
-                      static_cast<off_t>(hi - lo));
+  const PageSpan p = whole_pages(offset, offset + bytes);
+  if (p.hi > p.lo) {
+    (void)::fallocate(fd, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, static_cast<off_t>(p.lo),
+                      static_cast<off_t>(p.hi - p.lo));
   }
 }
 
