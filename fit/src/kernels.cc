@@ -36,11 +36,10 @@ void block_portable(const float* p, int n, const float* s, std::ptrdiff_t stride
   for (int i = 0; i < n; ++i) {
     const float* row = s + static_cast<std::ptrdiff_t>(i) * stride + j0;
     const float* pi = p + static_cast<std::ptrdiff_t>(i) * kTerms;
+    float v[kBlock];
+    for (std::ptrdiff_t t = 0; t < count; ++t) v[t] = scale * row[t];
     for (int k = 0; k < kTerms; ++k) {
-      for (std::ptrdiff_t t = 0; t < count; ++t) {
-        const float v = scale * row[t];
-        acc[k][t] = std::fma(pi[k], v, acc[k][t]);
-      }
+      for (std::ptrdiff_t t = 0; t < count; ++t) acc[k][t] = std::fma(pi[k], v[t], acc[k][t]);
     }
   }
   for (std::ptrdiff_t t = 0; t < count; ++t) {
