@@ -4,7 +4,7 @@
 # `ptmkit fit` (LRGB and RGB; to a new file and over an existing one), interleaved, medians of
 # RUNS runs, with peak resident memory.
 # Figures go in docs/PERFORMANCE.md.
-# Usage: [RUNS=N] scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench,
+# Usage: [RUNS=N] [SETTLE=S] scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench,
 # 2 threads, 3 runs)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
 set -euo pipefail
@@ -28,15 +28,19 @@ fi
 # as for a first fit of a capture), then again over that file (replacing an existing output:
 # the file system then also frees the old file, and ext4 starts writing the new one back when
 # it is renamed over the old). Every command starts after `sync`, so that no command's timing
-# includes the write-back of an earlier one's output. Each figure is the median wall time
-# (with the range), and the peak resident memory over the runs.
+# includes the write-back of an earlier one's output, and after SETTLE seconds of idle (0
+# unless set; on a virtual machine the host may still be busy with what the guest wrote).
+# Each figure is the median wall time (with the range), and the peak resident memory over the
+# runs.
 runs="${RUNS:-3}"
+settle="${SETTLE:-0}"
 kinds="decode lrgb rgb lrgb-replace rgb-replace"
 for kind in $kinds; do rm -f "$work/$kind.times"; done
 run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
   local out="$1"
   shift
   sync
+  sleep "$settle"
   /usr/bin/time -f "%e %M" -o "$work/time.txt" "$@" >/dev/null
   cat "$work/time.txt" >>"$out"
 }
@@ -48,7 +52,7 @@ summary() {
 
 pixels=$((4000 * 3000))
 decoded_mib=$((49 * pixels * 3 / 1024 / 1024))
-echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs"
+echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs; settle $settle s"
 for _ in $(seq "$runs"); do
   rm -f "$work/out-lrgb.ptm" "$work/out-rgb.ptm"
   run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
