@@ -6,7 +6,6 @@
 #include <functional>
 #include <limits>
 #include <optional>
-#include <type_traits>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
