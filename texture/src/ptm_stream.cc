@@ -280,7 +280,7 @@ void punch_hole(int fd, std::size_t offset, std::size_t bytes) {
 }
 
 // Rows per slice of end()'s encoding: enough texels per slice for the threads to share.
-constexpr int kSliceRows = 64;
+constexpr int kSliceRows = 16;
 
 }  // namespace
 
