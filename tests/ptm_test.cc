@@ -1,6 +1,7 @@
 // .ptm reading, writing, quantisation and streaming.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <cmath>
 #include <cstdio>
@@ -612,6 +613,58 @@ TEST(PtmStream, MisuseAndBadValuesLeaveNoFile) {
     }
   }
   EXPECT_TRUE(test::list_files(dir.path()).empty());
+}
+
+// Over an existing output the writer first drops that file's cached pages: the file must end
+// up replaced by the new map, a failed run must leave the old bytes as they were, and a FIFO at
+// the path must not make the writer wait for a writer of its own.
+TEST(PtmStream, ReplacesAnExistingOutputAndKeepsItOnFailure) {
+  test::ScratchDir dir;
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const CoefficientMap first = smooth_map(12, 10, ColourModel::kRGB);
+  CoefficientMap second = first;
+  for (float& c : second.coeffs) c *= 0.5f;
+  const fs::path out = dir / "out.ptm";
+  const fs::path fresh = dir / "fresh.ptm";
+  {
+    PtmStreamWriter writer(out);
+    stream_map(first, 4, writer);
+  }
+  const std::string old_bytes = bytes(out);
+  {
+    PtmStreamWriter writer(fresh);
+    stream_map(second, 4, writer);
+  }
+  {
+    PtmStreamWriter writer(out);
+    stream_map(second, 4, writer);
+  }
+  EXPECT_EQ(bytes(out), bytes(fresh));
+  EXPECT_NE(bytes(out), old_bytes);
+
+  CoefficientMap bad = first;
+  bad.coeffs[7] = std::numeric_limits<float>::quiet_NaN();
+  const std::string before = bytes(out);
+  {
+    PtmStreamWriter writer(out);
+    EXPECT_THROW(stream_map(bad, 4, writer), Error);
+  }
+  EXPECT_EQ(bytes(out), before);
+
+  const fs::path fifo = dir / "fifo.ptm";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  {
+    PtmStreamWriter writer(fifo);
+    stream_map(second, 4, writer);
+  }
+  EXPECT_TRUE(fs::is_regular_file(fifo));
+  EXPECT_EQ(bytes(fifo), bytes(fresh));
+  fs::remove(fresh);
+  fs::remove(fifo);
+  EXPECT_EQ(test::list_files(dir.path()).size(), 1u);  // out.ptm alone: no temporary left
 }
 
 // The writer's range pass takes 4 texels' terms at a time and the rest one by one: a bad
