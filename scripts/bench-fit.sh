@@ -4,21 +4,26 @@
 # `ptmkit fit` (LRGB and RGB; to a new file and over an existing one), interleaved, medians of
 # RUNS runs, with peak resident memory.
 # Figures go in docs/PERFORMANCE.md.
-# Usage: [RUNS=N] [SETTLE=S] scripts/bench-fit.sh [WORK_DIR] [THREADS]   (default: /tmp/ptmkit-bench,
-# 2 threads, 3 runs)
+# Usage: [RUNS=N] [SETTLE=S] [NOISE=SIGMA] scripts/bench-fit.sh [WORK_DIR] [THREADS]
+#   (default: /tmp/ptmkit-bench, 2 threads, 3 runs, sensor noise 3 grey levels)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
+# NOISE is the rendered sensor noise (sigma, grey levels). Decoding cost follows the JPEGs'
+# size: at 3 they are 1.8 bits a pixel, at 1 (the synthetic preset's own) 0.9, against 2-5
+# for photographs at quality 95 (docs/PERFORMANCE.md), so NOISE=1 gives a decode floor far
+# cheaper than a real capture's.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 work="${1:-/tmp/ptmkit-bench}"
 threads="${2:-2}"
 build="${PTMKIT_BUILD:-$(bash "$root/scripts/build.sh" | tail -n 1)}"
 ptmkit="$build/apps/ptmkit"
-stack="$work/s12mp"
+noise="${NOISE:-3}"
+stack="$work/s12mp-noise$noise"
 mkdir -p "$work"
 if [ ! -f "$stack/lights.lp" ]; then
-  echo "== rendering 49 x 4000x3000 JPEG (quality 95) into $stack"
+  echo "== rendering 49 x 4000x3000 JPEG (quality 95, noise $noise) into $stack"
   "$ptmkit" synth --out "$stack" --width 4000 --height 3000 --format jpg --no-shadows \
-    --no-truth --lights dome49 --seed 3
+    --no-truth --lights dome49 --seed 3 --noise "$noise"
 fi
 
 # The commands run interleaved, in rounds (decode; lrgb new, lrgb replacing; rgb new, rgb
@@ -52,7 +57,9 @@ summary() {
 
 pixels=$((4000 * 3000))
 decoded_mib=$((49 * pixels * 3 / 1024 / 1024))
-echo "stack: 49 images, 4000x3000x3, decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs; settle $settle s"
+jpeg_bytes=$(cat "$stack"/*.jpg | wc -c)
+bits_per_px=$(awk "BEGIN{printf \"%.2f\", $jpeg_bytes * 8 / (49 * $pixels)}")
+echo "stack: $stack: 49 images, 4000x3000x3 (JPEG $bits_per_px bits a pixel), decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs; settle $settle s"
 for _ in $(seq "$runs"); do
   rm -f "$work/out-lrgb.ptm" "$work/out-rgb.ptm"
   run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
