@@ -8,9 +8,10 @@
 #   (default: /tmp/ptmkit-bench, 2 threads, 3 runs, sensor noise 3 grey levels)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
 # NOISE is the rendered sensor noise (sigma, grey levels). Decoding cost follows the JPEGs'
-# size: at 3 they are 1.8 bits a pixel, at 1 (the synthetic preset's own) 0.9, against 2-5
-# for photographs at quality 95 (docs/PERFORMANCE.md), so NOISE=1 gives a decode floor far
-# cheaper than a real capture's.
+# size: at 3 they are 1.9 bits a pixel, at 1 (the synthetic preset's own) 0.9, against 2.3
+# for the real photographs in ../shared/data; and a real quality-95 stack of this size
+# decodes slower than the NOISE=3 one (docs/PERFORMANCE.md). NOISE=1 gives a decode floor
+# far cheaper than a real capture's.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 work="${1:-/tmp/ptmkit-bench}"

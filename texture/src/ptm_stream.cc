@@ -296,7 +296,9 @@ void drop_cached(const std::filesystem::path& path) {
   (void)::posix_fadvise(fd.fd, 0, 0, POSIX_FADV_DONTNEED);
 }
 
-// Rows per slice of end()'s encoding: enough texels per slice for the threads to share.
+// Rows per slice of end()'s encoding: enough texels per slice for the threads to share, few
+// enough that the slices in flight stay small (64 rows held 40 MiB more at the peak of a
+// 12-megapixel RGB fit, for no speed).
 constexpr int kSliceRows = 16;
 
 }  // namespace
