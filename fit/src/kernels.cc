@@ -219,8 +219,8 @@ __attribute__((target("avx2,fma"))) inline void rgb8_values(const std::uint8_t* 
 
 // lrgb_row_u8, 8 texels at a time; returns the texels done (a multiple of 8), the caller
 // finishes. Per block, image after image: the luma and the four colour sums (the fused
-// multiply-adds of luma_lrgb_texel), and the product's, all in registers: no luma row is
-// written and read back.
+// multiply-adds of luma_lrgb_texel, in the same order), and the product's, all in registers: no
+// luma row is written and read back.
 __attribute__((target("avx2,fma"))) int lrgb_row_u8_avx2(const float* p, int n,
                                                          const std::uint8_t* s,
                                                          std::ptrdiff_t stride, int w,
@@ -281,23 +281,29 @@ void bytes_to_unit(const std::uint8_t* in, std::size_t count, float* out) {
 
 namespace {
 
-// luma_lrgb_row's loop, for a caller compiled with or without FMA instructions: fused
-// multiply-adds in a fixed order (std::fma is exact either way), so both give the same bits.
-// The luma r kR + g kG + b kB as (r kR + g kG) + b kB, each addition fused: 2 of the 5
-// operations, and one per colour sum, saved over separate multiplies and adds.
+// One texel of one image for the luminance models: its luma l of (r, g, b) and the colour sums
+// yy += l l, yr += l r, yg += l g, yb += l b, by fused multiply-adds in a fixed order
+// (std::fma is exact whether or not the caller is compiled with FMA instructions, so every
+// path gives the same bits). The luma r kR + g kG + b kB as (r kR + g kG) + b kB, each
+// addition fused: 2 of the 5 operations, and one per colour sum, saved over separate
+// multiplies and adds. lrgb_row_u8_avx2 does the same, 8 texels at a time.
+__attribute__((always_inline)) inline float luma_lrgb_texel(float r, float g, float b, float* yy,
+                                                            float* yr, float* yg, float* yb) {
+  const float l = std::fma(kLumaBf, b, std::fma(kLumaGf, g, kLumaRf * r));
+  *yy = std::fma(l, l, *yy);
+  *yr = std::fma(l, r, *yr);
+  *yg = std::fma(l, g, *yg);
+  *yb = std::fma(l, b, *yb);
+  return l;
+}
+
+// luma_lrgb_row's loop, for a caller compiled with or without FMA instructions.
 __attribute__((always_inline)) inline void luma_lrgb_loop(const float* s, int w, float scale,
                                                           float* yi, float* s0, float* s1,
                                                           float* s2, float* s3) {
   for (int x = 0; x < w; ++x) {
-    const float r = scale * s[3 * x];
-    const float g = scale * s[3 * x + 1];
-    const float b = scale * s[3 * x + 2];
-    const float l = std::fma(kLumaBf, b, std::fma(kLumaGf, g, kLumaRf * r));
-    yi[x] = l;
-    s0[x] = std::fma(l, l, s0[x]);
-    s1[x] = std::fma(l, r, s1[x]);
-    s2[x] = std::fma(l, g, s2[x]);
-    s3[x] = std::fma(l, b, s3[x]);
+    yi[x] = luma_lrgb_texel(scale * s[3 * x], scale * s[3 * x + 1], scale * s[3 * x + 2], &s0[x],
+                            &s1[x], &s2[x], &s3[x]);
   }
 }
 
@@ -344,14 +350,7 @@ void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptr
     float yy = 0.0f, yr = 0.0f, yg = 0.0f, yb = 0.0f;
     for (int i = 0; i < n; ++i) {
       const std::uint8_t* t = s + static_cast<std::ptrdiff_t>(i) * stride + 3 * x;
-      const float r = t[0];
-      const float g = t[1];
-      const float b = t[2];
-      const float l = std::fma(kLumaBf, b, std::fma(kLumaGf, g, kLumaRf * r));
-      yy = std::fma(l, l, yy);
-      yr = std::fma(l, r, yr);
-      yg = std::fma(l, g, yg);
-      yb = std::fma(l, b, yb);
+      const float l = luma_lrgb_texel(t[0], t[1], t[2], &yy, &yr, &yg, &yb);
       for (int k = 0; k < kTerms; ++k) acc[k] = std::fma(p[i * kTerms + k], l, acc[k]);
     }
     s0[x] = yy;
