@@ -5,7 +5,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include <filesystem>
+#include <string>
+
 #include "ptmkit/fit/robust.h"
+#include "ptmkit/texture/web_export.h"
 
 namespace ptmkit::app {
 
@@ -18,6 +22,24 @@ void add_direct_command(CLI::App& root);
 void add_compare_command(CLI::App& root);
 void add_calibrate_command(CLI::App& root);
 void add_calibrate_board_commands(CLI::App* calibrate);  // calibrate camera, calibrate plane
+// `export` and its `web` child; the other `export` children are added by
+// add_export_convert_commands(export_cmd) where that is built.
+void add_export_command(CLI::App& root);
+void add_view_command(CLI::App& root);
+
+// Flags shared by `export web` and `view` (how a texture becomes a web folder).
+struct WebExportArgs {
+  std::string layout = "image";
+  std::string normals;
+  texture::WebExportOptions options;
+  // options with the layout and normals applied; throws ptmkit::Error on a bad layout.
+  [[nodiscard]] texture::WebExportOptions resolved() const;
+};
+void add_web_export_flags(CLI::App* cmd, WebExportArgs* args);
+// Reads a .ptm or an HSH .rti (by extension, else by content) and exports it.
+texture::WebExportReport export_texture_to_web(const std::string& input,
+                                               const std::filesystem::path& dir,
+                                               const texture::WebExportOptions& options);
 
 // The robust solvers' tuning flags (--shadow-k, --highlight-k, --readmit-k, --dark-fraction,
 // --keep-within-grey, --no-fill), bound to *robust; shared by fit and compare.

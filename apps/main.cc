@@ -29,6 +29,8 @@ int main(int argc, char** argv) {
   ptmkit::app::add_direct_command(app);
   ptmkit::app::add_compare_command(app);
   ptmkit::app::add_calibrate_command(app);
+  ptmkit::app::add_export_command(app);
+  ptmkit::app::add_view_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

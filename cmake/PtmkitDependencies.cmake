@@ -23,3 +23,8 @@ function(ptmkit_stage name)
   target_link_libraries(ptmkit_${name} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS}
                         ptmkit_build_flags)
 endfunction()
+
+# libjpeg (texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).
+find_package(JPEG REQUIRED)
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
