@@ -43,6 +43,12 @@ void add_web_export_flags(CLI::App* cmd, WebExportArgs* args) {
                   "JPEG quality of the planes, 1..100 (no chroma subsampling)")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
+  cmd->add_option("--jpeg-colour", args->jpeg_colour,
+                  "JPEG colour transform of the planes: auto (YCbCr for the rgb colour space, "
+                  "as relight writes; none for lrgb), ycbcr, or none (R, G, B components: about "
+                  "1-2 fewer bytes of error per plane, larger files)")
+      ->check(CLI::IsMember({"auto", "ycbcr", "none"}))
+      ->capture_default_str();
   cmd->add_option("--normals", args->normals,
                   "Normal map to include as normals.png (what `ptmkit fit --normals` wrote: "
                   ".exr with x, y, z, or .png with (n + 1) / 2); same size as the texture");
@@ -57,6 +63,7 @@ texture::WebExportOptions WebExportArgs::resolved() const {
   texture::WebExportOptions o = options;
   o.layout = texture::parse_web_layout(layout);
   o.normals = normals;
+  o.jpeg_colour = texture::parse_web_jpeg_colour(jpeg_colour);
   return o;
 }
 

@@ -31,6 +31,7 @@ void add_view_command(CLI::App& root);
 struct WebExportArgs {
   std::string layout = "image";
   std::string normals;
+  std::string jpeg_colour = "auto";
   texture::WebExportOptions options;
   // options with the layout and normals applied; throws ptmkit::Error on a bad layout.
   [[nodiscard]] texture::WebExportOptions resolved() const;

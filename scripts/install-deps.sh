@@ -7,7 +7,10 @@ packages=(
   libopenimageio-dev openimageio-tools libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   time
+  libjpeg-dev libcpp-httplib-dev
 )
+# The browser tests' chromium and node (scripts/install-browser-deps.sh; never fatal).
+bash "$(dirname "$0")/install-browser-deps.sh" || true
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -39,6 +39,25 @@ WebLayout parse_web_layout(const std::string& name) {
   throw Error("web layout '" + name + "': expected image or deepzoom");
 }
 
+std::string to_string(WebJpegColour colour) {
+  switch (colour) {
+    case WebJpegColour::kYCbCr:
+      return "ycbcr";
+    case WebJpegColour::kNone:
+      return "none";
+    case WebJpegColour::kAuto:
+      break;
+  }
+  return "auto";
+}
+
+WebJpegColour parse_web_jpeg_colour(const std::string& name) {
+  if (name == "auto") return WebJpegColour::kAuto;
+  if (name == "ycbcr") return WebJpegColour::kYCbCr;
+  if (name == "none") return WebJpegColour::kNone;
+  throw Error("JPEG colour transform '" + name + "': expected auto, ycbcr or none");
+}
+
 int web_deepzoom_levels(int width, int height, int tile_size_px) {
   const double ratio = static_cast<double>(std::max(width, height)) / tile_size_px;
   if (ratio <= 1.0) return 1;
@@ -511,7 +530,9 @@ WebExportReport export_planes(const PlaneSource& src, const fs::path& dir,
 
   TempFolder temp(dir);
   Writer out{temp.path()};
-  const bool ycbcr = src.colorspace == "rgb";
+  const bool ycbcr = options.jpeg_colour == WebJpegColour::kAuto
+                         ? src.colorspace == "rgb"
+                         : options.jpeg_colour == WebJpegColour::kYCbCr;
   double err_sum = 0.0;
   std::size_t err_count = 0;
   std::vector<float> row_buf(static_cast<std::size_t>(src.width) * src.planes);

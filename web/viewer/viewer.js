@@ -224,6 +224,8 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
       this.queue = [];
       this.frameRequested = false;
       this.requested = [];     // tile URLs fetched, in order (for tests)
+      this.useClock = 0;
+      this.maxTiles = 256;     // loaded tiles kept (each holds one texture per plane JPEG)
       this.listeners = [];
     }
 
@@ -364,8 +366,9 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
       const lv = this.layout.levels[L];
       const n = this.layout.levels.length, side = this.layout.tile * 2 ** (n - 1 - L);
       const out = [];
-      const tx0 = Math.max(0, Math.floor(x0 / side)), tx1 = Math.min(lv.nx - 1, Math.floor(x1 / side));
-      const ty0 = Math.max(0, Math.floor(y0 / side)), ty1 = Math.min(lv.ny - 1, Math.floor(y1 / side));
+      // The view's right and bottom edges are exclusive.
+      const tx0 = Math.max(0, Math.floor(x0 / side)), tx1 = Math.min(lv.nx - 1, Math.ceil(x1 / side) - 1);
+      const ty0 = Math.max(0, Math.floor(y0 / side)), ty1 = Math.min(lv.ny - 1, Math.ceil(y1 / side) - 1);
       for (let y = ty0; y <= ty1; ++y) for (let x = tx0; x <= tx1; ++x) out.push([L, x, y]);
       return out;
     }
@@ -373,10 +376,32 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
       const key = `${L}/${x}/${y}`;
       let t = this.tiles.get(key);
       if (!t) {
-        t = {L, x, y, state: 'new', textures: null, waiters: []};
+        t = {L, x, y, key, state: 'new', textures: null, waiters: [], used: 0};
         this.tiles.set(key, t);
       }
+      t.used = ++this.useClock;
       return t;
+    }
+    // Frees loaded tiles beyond `keep`, least recently used first (never one in use now).
+    evict(keep) {
+      const ready = [...this.tiles.values()].filter((t) => t.state === 'ready' || t.state === 'error');
+      if (ready.length <= keep) return;
+      const inUse = new Set(this.neededTiles().map(([L, x, y]) => `${L}/${x}/${y}`));
+      ready.sort((a, b) => a.used - b.used);
+      for (const t of ready.slice(0, ready.length - keep)) {
+        if (inUse.has(t.key)) continue;
+        if (t.textures) for (const tex of t.textures) this.gl.deleteTexture(tex);
+        this.tiles.delete(t.key);
+      }
+    }
+    // Forgets every tile (and the record of fetched URLs): the next frame fetches afresh.
+    clearTiles() {
+      for (const t of this.tiles.values()) {
+        if (t.textures) for (const tex of t.textures) this.gl.deleteTexture(tex);
+      }
+      this.tiles.clear();
+      this.queue = [];
+      this.requested = [];
     }
     // Loads a tile's JPEGs (once); resolves when loaded or failed.
     request(t) {
@@ -407,6 +432,10 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
           --this.loading;
           for (const w of t.waiters) w(t);
           t.waiters = [];
+          if (this.tiles.get(t.key) !== t && t.textures) {  // cleared while loading
+            for (const tex of t.textures) this.gl.deleteTexture(tex);
+          }
+          this.evict(this.maxTiles);
           this.redraw();
           this.pump();
         });
@@ -613,7 +642,7 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
     const el = Math.asin(Math.max(-1, Math.min(1, l[2]))) * 180 / Math.PI;
     let az = Math.atan2(l[1], l[0]) * 180 / Math.PI;
     if (az < 0) az += 360;
-    return `${l.map((v) => v.toFixed(3)).join(', ')}\nelevation ${el.toFixed(1)}°  azimuth ${az.toFixed(0)}°`;
+    return `${l.map((v) => v.toFixed(3)).join(', ')}\nel ${el.toFixed(1)}°  az ${az.toFixed(0)}°`;
   }
 
   async function main() {
@@ -651,8 +680,15 @@ void main() { o_colour = vec4(texture(u_normals, v_tc).rgb, 1.0); }`;
       if (d > 1) { x /= d; y /= d; }
       viewer.setLight([x, y, Math.sqrt(Math.max(0, 1 - x * x - y * y))]);
     };
-    widget.addEventListener('pointerdown', (ev) => { widget.setPointerCapture(ev.pointerId); fromWidget(ev); });
-    widget.addEventListener('pointermove', (ev) => { if (ev.buttons) fromWidget(ev); });
+    let moving = false;
+    widget.addEventListener('pointerdown', (ev) => {
+      widget.setPointerCapture(ev.pointerId);
+      moving = true;
+      fromWidget(ev);
+    });
+    widget.addEventListener('pointermove', (ev) => { if (moving) fromWidget(ev); });
+    widget.addEventListener('pointerup', (ev) => { if (moving) fromWidget(ev); moving = false; });
+    widget.addEventListener('pointercancel', () => { moving = false; });
     const refresh = () => {
       drawLightWidget(widget, viewer.light);
       text.textContent = lightText(viewer.light);

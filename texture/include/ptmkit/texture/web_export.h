@@ -42,12 +42,23 @@ enum class WebLayout {
 [[nodiscard]] std::string to_string(WebLayout layout);
 [[nodiscard]] WebLayout parse_web_layout(const std::string& name);
 
+// The JPEG colour transform of the planes.
+enum class WebJpegColour {
+  kAuto,   // the format's convention: YCbCr for colorspace rgb, none (RGB components) otherwise
+  kYCbCr,  // the ordinary JPEG transform (smaller files; about 1-2 more bytes of plane error)
+  kNone,   // R, G, B stored as components (Adobe marker), the least plane error
+};
+// "auto", "ycbcr", "none"; parse throws ptmkit::Error for anything else.
+[[nodiscard]] std::string to_string(WebJpegColour colour);
+[[nodiscard]] WebJpegColour parse_web_jpeg_colour(const std::string& name);
+
 struct WebExportOptions {
   WebLayout layout = WebLayout::kImage;
   // Tile side in pixels for the deep-zoom layout (16..4096).
   int tile_size_px = 256;
   // JPEG quality, 1..100 (100: the smallest loss libjpeg offers; the planes stay lossy).
   int quality = 95;
+  WebJpegColour jpeg_colour = WebJpegColour::kAuto;
   // Optional normal map to copy as normals.png: an .exr holding x, y, z in -1..1, or an
   // 8/16-bit image holding (n + 1) / 2 (what `ptmkit fit --normals` writes). Same size as the
   // texture. Empty: no normals.png.
