@@ -105,6 +105,10 @@ void run_view(const ViewArgs& args) {
         return httplib::Server::HandlerResponse::Handled;
       }
     }
+    if (req.path == "/favicon.ico") {  // none: answered, so browsers do not log a 404
+      res.status = 204;
+      return httplib::Server::HandlerResponse::Handled;
+    }
     return httplib::Server::HandlerResponse::Unhandled;
   });
   int port = args.port;

@@ -587,10 +587,11 @@ WebExportReport export_planes(const PlaneSource& src, const fs::path& dir,
       continue;
     }
     const int ts = options.tile_size_px;
+    constexpr int kOverlap = 1;
     std::ostringstream dzi;
     dzi << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
         << "<Image xmlns=\"http://schemas.microsoft.com/deepzoom/2008\" Format=\"jpg\" "
-        << "Overlap=\"0\" TileSize=\"" << ts << "\">\n"
+        << "Overlap=\"" << kOverlap << "\" TileSize=\"" << ts << "\">\n"
         << "  <Size Width=\"" << src.width << "\" Height=\"" << src.height << "\"/>\n"
         << "</Image>\n";
     out.write(name + ".dzi", dzi.str());
@@ -605,8 +606,10 @@ WebExportReport export_planes(const PlaneSource& src, const fs::path& dir,
       const int ny = (level.height + ts - 1) / ts;
       for (int ty = 0; ty < ny; ++ty) {
         for (int tx = 0; tx < nx; ++tx) {
-          const int x0 = tx * ts, y0 = ty * ts;
-          const int w = std::min(ts, level.width - x0), h = std::min(ts, level.height - y0);
+          // The tile's pixels plus kOverlap on each inner side (seamless linear filtering).
+          const int x0 = std::max(0, tx * ts - kOverlap), y0 = std::max(0, ty * ts - kOverlap);
+          const int w = std::min((tx + 1) * ts + kOverlap, level.width) - x0;
+          const int h = std::min((ty + 1) * ts + kOverlap, level.height) - y0;
           const auto bytes_in = quantise_region(level, q, x0, y0, w, h);
           const auto jpeg = encode_jpeg(bytes_in.data(), w, h, options.quality, ycbcr);
           if (l == report.levels - 1) measure(bytes_in, jpeg, w, h);

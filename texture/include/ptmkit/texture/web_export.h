@@ -8,8 +8,9 @@
 //                        (one value per plane), optional pixelSizeInMM; a "ptmkit" object
 //                        names the layout and whether normals.png exists
 //   plane_J.jpg          (layout image) JPEG J holds planes 3J, 3J+1, 3J+2 as its R, G, B
-//   plane_J.dzi          (layout deepzoom) the DZI descriptor, Overlap 0, and
-//   plane_J_files/L/X_Y.jpg   tiles; level 0 is the single tile, the last level is full size
+//   plane_J.dzi          (layout deepzoom) the DZI descriptor, Overlap 1, and
+//   plane_J_files/L/X_Y.jpg   tiles; level 0 is the single tile, the last level is full size;
+//                        each tile holds one more pixel on each side that has a neighbour
 //   normals.png          optional, (n + 1) / 2 with x right, y up the image, z toward the viewer
 //   index.html, viewer.js, viewer.css   the viewer (served over HTTP: `ptmkit view DIR`)
 //
