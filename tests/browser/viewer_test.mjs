@@ -116,17 +116,18 @@ async function canvasAt(page, l) {
 // Test code's own evaluation of the folder's planes (an independent reader): each JPEG
 // decoded by the browser's 2D canvas, coef = (byte / 255 - bias) * scale, the basis in
 // double precision, clamped, rounded.
-async function planesEvaluation(page, l) {
-  const rgb = await page.evaluate(async (l) => {
+async function planesEvaluation(page, l, region) {
+  const rgb = await page.evaluate(async ([l, region]) => {
     const info = await (await fetch('info.json')).json();
-    const W = info.width, H = info.height, np = info.nplanes, m = info.materials[0];
+    const np = info.nplanes, m = info.materials[0];
+    const [X0, Y0, W, H] = region || [0, 0, info.width, info.height];
     const jpegs = Math.ceil(np / 3);
     const planes = [];
     for (let j = 0; j < jpegs; ++j) {
       const bmp = await createImageBitmap(await (await fetch(`plane_${j}.jpg`)).blob(),
         {colorSpaceConversion: 'none', premultiplyAlpha: 'none'});
       const c = new OffscreenCanvas(W, H).getContext('2d');
-      c.drawImage(bmp, 0, 0);
+      c.drawImage(bmp, -X0, -Y0);
       planes.push(c.getImageData(0, 0, W, H).data);
     }
     const n = Math.hypot(...l), x = l[0] / n, y = l[1] / n, z = l[2] / n;
@@ -159,7 +160,7 @@ async function planesEvaluation(page, l) {
       for (let k = 0; k < 3; ++k) out[3 * i + k] = Math.round(Math.min(1, Math.max(0, c3[k])) * 255);
     }
     return out;
-  }, l);
+  }, [l, region]);
   return Uint8Array.from(rgb);
 }
 
@@ -331,6 +332,26 @@ async function main() {
     const dflip = diff(flipVertical(canvas), ref);
     check(!within(dflip), `deep zoom: the flipped region fails: ${fmt(dflip)}`);
     check(await stopView(view), 'deep zoom: ptmkit view stops on SIGTERM');
+
+    // A folder exported by relight (OpenLIME's sample, ../shared/data): it opens in this
+    // viewer as a folder, and the canvas equals the test code's evaluation of its planes.
+    const sample = path.join(process.env.PTMKIT_DATA_DIR || path.join(path.dirname(new URL(import.meta.url).pathname), '..', '..', '..', 'shared', 'data'), 'real-files', 'openlime-ptm');
+    if (fs.existsSync(path.join(sample, 'info.json'))) {
+      const v = await startView(sample);
+      await openViewer(page, v.url);
+      const si = JSON.parse(fs.readFileSync(path.join(sample, 'info.json'), 'utf8'));
+      // A 200 x 150 region at 1:1 (the whole 1024 x 1024 evaluated in JavaScript is slow).
+      const region = [400, 300, 200, 150];
+      await setOneToOne(page, ...region);
+      for (const l of [LIGHTS[1], LIGHTS[4]]) {
+        const c = await canvasAt(page, l);
+        const dp = diff(c, {width: region[2], height: region[3], rgb: await planesEvaluation(page, l, region)});
+        check(dp.max <= 1, `relight's export (openlime-ptm, ${si.width} x ${si.height}), region at 1:1: canvas vs its planes evaluated in test code: ${fmt(dp)}`);
+      }
+      check(await stopView(v), 'openlime-ptm: ptmkit view stops on SIGTERM');
+    } else {
+      console.log('skip: relight\'s sample export not found at ' + sample + ' (set PTMKIT_DATA_DIR)');
+    }
     check(offsite.length === 0, `no request left 127.0.0.1 (${offsite.length})`);
   } finally {
     await context.close();
