@@ -286,6 +286,8 @@ std::vector<unsigned char> decode_jpeg(const std::vector<unsigned char>& data, i
                                        int height) {
   jpeg_decompress_struct cinfo{};
   JpegErrorManager err{};
+  // Declared before setjmp: a longjmp back here must not skip an object's construction.
+  std::vector<unsigned char> out;
   cinfo.err = jpeg_std_error(&err.pub);
   err.pub.error_exit = jpeg_error_exit;
   if (setjmp(err.jump)) {
@@ -303,7 +305,7 @@ std::vector<unsigned char> decode_jpeg(const std::vector<unsigned char>& data, i
     jpeg_destroy_decompress(&cinfo);
     throw Error("JPEG decoding: unexpected size");
   }
-  std::vector<unsigned char> out(static_cast<std::size_t>(width) * height * 3);
+  out.resize(static_cast<std::size_t>(width) * height * 3);
   while (cinfo.output_scanline < cinfo.output_height) {
     JSAMPROW row = out.data() + static_cast<std::size_t>(cinfo.output_scanline) * width * 3;
     jpeg_read_scanlines(&cinfo, &row, 1);
