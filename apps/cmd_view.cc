@@ -69,6 +69,13 @@ void run_view(const ViewArgs& args) {
                   "HSH .rti)");
     }
     dir = args.input;
+    if (!args.web.normals.empty() || args.web.layout != "image" ||
+        args.web.options.pixel_size_mm != 0.0) {
+      std::fprintf(stderr,
+                   "ptmkit: warning: --layout, --normals and --pixel-size-mm apply to a .ptm or "
+                   ".rti converted on the fly; %s is served as it is\n",
+                   args.input.c_str());
+    }
   } else {
     temp = std::make_unique<TempDir>();
     dir = temp->path() / "export";
