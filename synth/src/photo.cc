@@ -112,23 +112,29 @@ PhotoOptions photo_preset_options(std::string_view name) {
   PhotoOptions o;
   o.preset = std::string(name);
   // Top-down dome: ground 400 mm away, 3.2 px per mm there.
-  auto dome_spheres = [&](double radius_mm, SphereMaterial m) {
-    // Each sphere rests in a cup of radius base_radius_frac * r on a stand 0.4 r tall.
+  auto dome_spheres = [&](double radius_mm, SphereMaterial m, double stand_frac) {
+    // Each sphere rests in a cup of radius base_radius_frac * r on a stand stand_frac * r
+    // tall.
     const double rise =
-        radius_mm * (0.4 + std::sqrt(1.0 - o.base_radius_frac * o.base_radius_frac));
+        radius_mm * (stand_frac + std::sqrt(1.0 - o.base_radius_frac * o.base_radius_frac));
     o.spheres = {PhotoSphere{V3(-80.0, -20.0, o.camera_height_mm - rise), radius_mm, m},
                  PhotoSphere{V3(80.0, -20.0, o.camera_height_mm - rise), radius_mm, m}};
   };
   if (name == "photo-dome") {
-    dome_spheres(12.5, SphereMaterial::kBlackGlossy);
+    dome_spheres(12.5, SphereMaterial::kBlackGlossy, 0.4);
     return o;
   }
   if (name == "photo-glass") {
-    dome_spheres(9.0, SphereMaterial::kGlass);
+    // Marbles lying on the cloth: the cloth under and beside them, where their caustic falls,
+    // is seen through them.
+    o.sphere_bases = false;
+    o.spheres = {
+        PhotoSphere{V3(-75.0, -20.0, o.camera_height_mm - 9.0), 9.0, SphereMaterial::kGlass},
+        PhotoSphere{V3(75.0, -20.0, o.camera_height_mm - 9.0), 9.0, SphereMaterial::kGlass}};
     return o;
   }
   if (name == "photo-chrome") {
-    dome_spheres(12.5, SphereMaterial::kChrome);
+    dome_spheres(12.5, SphereMaterial::kChrome, 0.4);
     o.distractor = Distractor::kDish;
     o.distractor_radius_mm = 17.0;
     return o;
@@ -141,10 +147,10 @@ PhotoOptions photo_preset_options(std::string_view name) {
     o.windows = 3;
     o.lamps = 3;
     o.ground_albedo = 0.06;
-    // Centre at pixel (300, 165): the top of the outline leaves the frame, the cup hides the
+    // Centre at pixel (300, 150): the top of the outline leaves the frame, the cup hides the
     // bottom.
     const double z = 650.0;
-    o.spheres = {PhotoSphere{V3((300.0 - 319.5) / 760.0 * z, (165.0 - 179.5) / 760.0 * z, z), 150.0,
+    o.spheres = {PhotoSphere{V3((300.0 - 319.5) / 760.0 * z, (150.0 - 179.5) / 760.0 * z, z), 150.0,
                              SphereMaterial::kBlackGlossy}};
     o.lights = "rings:65:4:45,45:4:0,28:4:22.5";
     o.artefacts.flare_spokes = 8;

@@ -22,6 +22,8 @@ constexpr double kDielectricF0 = 0.04;
 constexpr double kBlackF0 = 0.05;
 constexpr double kBlackAlbedo = 0.02;
 constexpr double kChromeF0 = 0.8;
+// Peak radiance of the glow where a glass ball's focused beam leaves it, per unit irradiance.
+constexpr double kGlassGlow = 6.0;
 constexpr int kMaxDepth = 3;
 // The optics' blur around highlights (pixels), and the half-size of the block it is rendered
 // in around each mirror highlight.
@@ -234,6 +236,30 @@ Rgb PhotoScene::sphere(int i, const V3& p, const V3& d, const LightState* light,
     } else {
       through = environment(out);
     }
+  }
+  if (light != nullptr) {
+    // The ball focuses the light it lets in toward the far side (focus at 1.5 r from the
+    // centre for index 1.5); bubbles and striae in the glass scatter some of that converging
+    // beam, brightest where it is narrowest, near the far surface. Seen through the glass it
+    // is a hot spot on the side away from the light, where no mirror reflection of the light
+    // can be: the closest approach of this ray's path in the glass to the beam's axis.
+    const V3 axis = -light->l_cam;
+    const V3 w0 = p - s.centre_mm;
+    const double len = (p2 - p).norm();
+    const double b = t1.dot(axis), dw = t1.dot(w0), e = axis.dot(w0);
+    const double den = 1.0 - b * b;
+    double tr = 0.0, ua = 0.0;
+    if (den > 1e-9) {
+      tr = std::clamp((b * e - dw) / den, 0.0, len);
+      ua = std::clamp(e + b * tr, 0.6 * s.radius_mm, 0.97 * s.radius_mm);
+      tr = std::clamp(ua * b - dw, 0.0, len);
+    }
+    const V3 q = p + tr * t1;
+    const V3 qa = s.centre_mm + ua * axis;
+    const double sigma = 0.07 * s.radius_mm;
+    const double u = (ua / s.radius_mm - 0.6) / 0.37;  // 0 .. 1 toward the far surface
+    through += kGlassGlow * o.light_irradiance * u * u *
+               std::exp(-(q - qa).squaredNorm() / (2.0 * sigma * sigma));
   }
   Rgb inner = Rgb::Zero();
   const V3 t2 = reflect(t1, n2);

@@ -193,7 +193,8 @@ struct PhotoOptions {
 //                       70 mm left and right) in cups, a coin below the object, dark cloth,
 //                       dark room with 2 windows and 2 lamps, 22 lights (rings 15/40/65
 //                       degrees), every artefact on, sRGB JPEG quality 92.
-//   photo-glass:        photo-dome with glass marbles (radius 8 mm) and a coin.
+//   photo-glass:        photo-dome with glass marbles (radius 9 mm, 75 mm left and right)
+//                       lying on the cloth (no bases), and a coin.
 //   photo-chrome:       photo-dome with chrome spheres and a dish instead of the coin.
 //   photo-large-sphere: side view, one black glossy sphere (radius 150 mm, 650 mm away,
 //                       focal 760 px: radius about 180 px in a 640x360 frame, cut by the
