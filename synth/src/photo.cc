@@ -142,6 +142,7 @@ PhotoOptions photo_preset_options(std::string_view name) {
   if (name == "photo-large-sphere") {
     o.view = PhotoView::kSide;
     o.focal_px = 760.0;
+    o.base_outer_frac = o.base_radius_frac;
     o.object = false;
     o.distractor = Distractor::kNone;
     o.windows = 3;
@@ -211,6 +212,8 @@ void validate(const PhotoOptions& o) {
   require(
       std::isfinite(o.base_radius_frac) && o.base_radius_frac > 0.05 && o.base_radius_frac < 0.95,
       "base radius fraction must be in (0.05, 0.95)");
+  require(std::isfinite(o.base_outer_frac) && o.base_outer_frac >= 0.0 && o.base_outer_frac <= 3.0,
+          "base outer radius fraction must be in [0, 3]");
   require(std::isfinite(o.object_size_mm) && o.object_size_mm > 0.0, "object size must be > 0");
   require(o.distractor_offset_mm.allFinite() && std::isfinite(o.distractor_radius_mm) &&
               o.distractor_radius_mm > 0.0,
@@ -356,6 +359,7 @@ PhotoScene::PhotoScene(const PhotoOptions& options) : o(options) {
   for (const PhotoSphere& s : o.spheres) {
     Base b;
     b.radius_mm = o.base_radius_frac * s.radius_mm;
+    b.outer_radius_mm = std::max(b.radius_mm, o.base_outer_frac * s.radius_mm);
     b.rim_mm = s.centre_mm - up * std::sqrt(s.radius_mm * s.radius_mm - b.radius_mm * b.radius_mm);
     b.length_mm = up.dot(b.rim_mm) - ground_offset;
     b.on = o.sphere_bases && b.length_mm > 0.0;
@@ -405,6 +409,7 @@ PhotoScene::PhotoScene(const PhotoOptions& options) : o(options) {
     has_object = true;
   }
   build_truth();
+  build_static_refine();
 }
 
 Rgb PhotoScene::environment(const V3& w) const {
@@ -470,18 +475,32 @@ Hit PhotoScene::intersect(const V3& origin, const V3& d, bool camera_body, int s
     const double qa = dp.squaredNorm();
     if (qa < 1e-18) continue;
     const double qb = dp.dot(wp);
-    const double qc = wp.squaredNorm() - b.radius_mm * b.radius_mm;
+    const double qc = wp.squaredNorm() - b.outer_radius_mm * b.outer_radius_mm;
     const double disc = qb * qb - qa * qc;
-    if (disc <= 0.0) continue;
-    const double sq = std::sqrt(disc);
-    for (double t : {(-qb - sq) / qa, (-qb + sq) / qa}) {
-      if (t <= kEps || t >= h.t) continue;
-      const double along = (w + t * d).dot(down);
-      if (along < 0.0 || along > b.length_mm) continue;
-      h.t = t;
-      h.kind = HitKind::kBase;
-      h.index = static_cast<int>(i);
-      break;
+    if (disc > 0.0) {
+      const double sq = std::sqrt(disc);
+      for (double t : {(-qb - sq) / qa, (-qb + sq) / qa}) {
+        if (t <= kEps || t >= h.t) continue;
+        const double along = (w + t * d).dot(down);
+        if (along < 0.0 || along > b.length_mm) continue;
+        h.t = t;
+        h.kind = HitKind::kBase;
+        h.index = static_cast<int>(i);
+        break;
+      }
+    }
+    // The flat top at the rim, between the cup and the side.
+    const double dd = d.dot(down);
+    if (b.outer_radius_mm > b.radius_mm && std::abs(dd) > 1e-12) {
+      const double t = -w.dot(down) / dd;
+      if (t > kEps && t < h.t) {
+        const double r2 = (w + t * d).squaredNorm();
+        if (r2 >= b.radius_mm * b.radius_mm && r2 <= b.outer_radius_mm * b.outer_radius_mm) {
+          h.t = t;
+          h.kind = HitKind::kBase;
+          h.index = static_cast<int>(i);
+        }
+      }
     }
   }
   const double denom = up.dot(d);

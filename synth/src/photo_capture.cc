@@ -157,6 +157,7 @@ PhotoReport render_photo_capture(const PhotoOptions& options, const fs::path& ou
     if (o.sphere_bases) {
       const double rb = o.base_radius_frac * t.sphere.radius_mm;
       s["base"] = {{"radius_mm", rb},
+                   {"outer_radius_mm", std::max(rb, o.base_outer_frac * t.sphere.radius_mm)},
                    {"top_mm", std::sqrt(t.sphere.radius_mm * t.sphere.radius_mm - rb * rb)}};
     } else {
       s["base"] = nullptr;

@@ -42,7 +42,8 @@ struct Lamp {
 struct Base {
   bool on = false;
   Eigen::Vector3d rim_mm = Eigen::Vector3d::Zero();
-  double radius_mm = 0.0;
+  double radius_mm = 0.0;        // the cup: where the sphere rests
+  double outer_radius_mm = 0.0;  // the stand's side
   double length_mm = 0.0;
 };
 
@@ -75,6 +76,9 @@ class PhotoScene {
   SynthOptions relief_options;
   Scene relief;
   PhotoTruth truth;
+  // Pixels supersampled in every image (edges, contrast and saturation of the static scene),
+  // so what does not change with the light is sampled alike in every image.
+  std::vector<std::uint8_t> static_refine;
 
   [[nodiscard]] Eigen::Array3d environment(const Eigen::Vector3d& w) const;
   [[nodiscard]] double light_term(const Eigen::Vector3d& w, const Eigen::Vector3d& l,
@@ -91,12 +95,14 @@ class PhotoScene {
   [[nodiscard]] Eigen::Array3d radiance(const Eigen::Vector3d& origin, const Eigen::Vector3d& d,
                                         const LightState* light, int depth, int skip_sphere,
                                         int* id) const;
-  [[nodiscard]] Sample sample(double x, double y, const LightState& light) const;
+  // One primary sample; `light` null: the static scene.
+  [[nodiscard]] Sample sample(double x, double y, const LightState* light) const;
   // Linear radiance (exposure applied), before the lens artefacts.
   [[nodiscard]] Image trace(const LightState& light) const;
 
  private:
   void build_truth();
+  void build_static_refine();
   [[nodiscard]] Eigen::Array3d ground(const Eigen::Vector3d& p, const Eigen::Vector3d& view,
                                       const LightState* light, int* id) const;
   [[nodiscard]] Eigen::Array3d sphere(int i, const Eigen::Vector3d& p, const Eigen::Vector3d& d,

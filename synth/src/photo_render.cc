@@ -23,7 +23,7 @@ constexpr double kBlackF0 = 0.05;
 constexpr double kBlackAlbedo = 0.02;
 constexpr double kChromeF0 = 0.8;
 // Peak radiance of the glow where a glass ball's focused beam leaves it, per unit irradiance.
-constexpr double kGlassGlow = 6.0;
+constexpr double kGlassGlow = 20.0;
 constexpr int kMaxDepth = 3;
 // The optics' blur around highlights (pixels), and the half-size of the block it is rendered
 // in around each mirror highlight.
@@ -295,7 +295,9 @@ Rgb PhotoScene::radiance(const V3& origin, const V3& d, const LightState* light,
       if (id != nullptr) *id = kIdBase + h.index;
       const Base& b = bases[static_cast<std::size_t>(h.index)];
       const V3 w = h.point - b.rim_mm;
-      const V3 radial = (w - w.dot(-up) * (-up)).normalized();
+      // The side (radial normal) or the flat top (up).
+      const V3 radial =
+          std::abs(w.dot(up)) < 1e-6 ? V3(up) : V3((w - w.dot(-up) * (-up)).normalized());
       // Matt dark grey plastic with a faint sheen.
       double irr = ambient;
       if (light != nullptr) {
@@ -311,10 +313,10 @@ Rgb PhotoScene::radiance(const V3& origin, const V3& d, const LightState* light,
   return Rgb::Zero();
 }
 
-Sample PhotoScene::sample(double x, double y, const LightState& light) const {
+Sample PhotoScene::sample(double x, double y, const LightState* light) const {
   Sample s;
   const V3 d = pinhole_ray(x, y, o.focal_px, pp);
-  s.rgb = radiance(V3::Zero(), d, &light, kMaxDepth, -1, &s.id) * o.exposure;
+  s.rgb = radiance(V3::Zero(), d, light, kMaxDepth, -1, &s.id) * o.exposure;
   s.hot = s.rgb.maxCoeff() > 1.0;
   return s;
 }
@@ -327,7 +329,7 @@ Image PhotoScene::trace(const LightState& light) const {
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y) {
       for (int x = 0; x < w; ++x) {
-        const Sample s = sample(x, y, light);
+        const Sample s = sample(x, y, &light);
         const std::size_t at =
             static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
         ids[at] = s.id;
@@ -341,36 +343,24 @@ Image PhotoScene::trace(const LightState& light) const {
   // sub-pixel discs that one sample per pixel can miss).
   std::vector<std::uint8_t> level(ids.size(), 0);
   const int ss = o.supersample;
-  std::vector<float> lum(ids.size());
-  for (std::size_t i = 0; i < ids.size(); ++i) {
-    const float* p = img.data() + 3 * i;
-    lum[i] = 0.25f * p[0] + 0.5f * p[1] + 0.25f * p[2];
-  }
   if (ss > 1) {
+    // The static scene's map, and this light's saturated samples with their neighbours.
     tbb::parallel_for(0, h, [&](int y) {
       for (int x = 0; x < w; ++x) {
         const std::size_t at =
             static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-        bool glass = ids[at] >= kIdSphere && ids[at] < kIdSphere + 10 &&
-                     o.spheres[static_cast<std::size_t>(ids[at] - kIdSphere)].material ==
-                         SphereMaterial::kGlass;
-        float lo = lum[at], hi = lum[at];
-        bool refine = glass;
+        bool refine = static_refine[at] != 0;
         for (int dy = -1; dy <= 1 && !refine; ++dy) {
           for (int dx = -1; dx <= 1; ++dx) {
             const int xx = x + dx, yy = y + dy;
             if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-            const std::size_t n = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
-                                  static_cast<std::size_t>(xx);
-            if (ids[n] != ids[at] || hot[n] != 0) {
+            if (hot[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
+                    static_cast<std::size_t>(xx)] != 0) {
               refine = true;
               break;
             }
-            lo = std::min(lo, lum[n]);
-            hi = std::max(hi, lum[n]);
           }
         }
-        if (!refine && hi - lo > 0.02f + 0.1f * hi) refine = true;
         if (refine) level[at] = 1;
       }
     });
@@ -410,7 +400,7 @@ Image PhotoScene::trace(const LightState& light) const {
       for (int i = 0; i < nx; ++i) {
         samples[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
                 static_cast<std::size_t>(i)] =
-            sample(sx0 + (i + 0.5) / kN, sy0 + (j + 0.5) / kN, light).rgb;
+            sample(sx0 + (i + 0.5) / kN, sy0 + (j + 0.5) / kN, &light).rgb;
       }
     });
     tbb::parallel_for(b.y0, b.y1 + 1, [&](int y) {
@@ -445,7 +435,7 @@ Image PhotoScene::trace(const LightState& light) const {
       Rgb acc = Rgb::Zero();
       for (int sy = 0; sy < n; ++sy) {
         for (int sx = 0; sx < n; ++sx) {
-          acc += sample(x - 0.5 + (sx + 0.5) / n, y - 0.5 + (sy + 0.5) / n, light).rgb;
+          acc += sample(x - 0.5 + (sx + 0.5) / n, y - 0.5 + (sy + 0.5) / n, &light).rgb;
         }
       }
       acc /= static_cast<double>(n * n);
@@ -453,6 +443,53 @@ Image PhotoScene::trace(const LightState& light) const {
     }
   });
   return img;
+}
+
+void PhotoScene::build_static_refine() {
+  const int w = o.width, h = o.height;
+  const std::size_t count = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+  static_refine.assign(count, 0);
+  if (o.supersample <= 1) return;
+  std::vector<int> ids(count);
+  std::vector<float> lum(count);
+  std::vector<std::uint8_t> hot(count);
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const Sample s = sample(x, y, nullptr);
+      const std::size_t at =
+          static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+      ids[at] = s.id;
+      hot[at] = s.hot ? 1 : 0;
+      lum[at] = static_cast<float>(0.25 * s.rgb[0] + 0.5 * s.rgb[1] + 0.25 * s.rgb[2]);
+    }
+  });
+  // Edges between surfaces, strong contrast, saturated samples and their neighbours, and
+  // glass (whose refracted view changes quickly).
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t at =
+          static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+      bool refine = ids[at] >= kIdSphere && ids[at] < kIdSphere + 10 &&
+                    o.spheres[static_cast<std::size_t>(ids[at] - kIdSphere)].material ==
+                        SphereMaterial::kGlass;
+      float lo = lum[at], hi = lum[at];
+      for (int dy = -1; dy <= 1 && !refine; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          const std::size_t n = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
+                                static_cast<std::size_t>(xx);
+          if (ids[n] != ids[at] || hot[n] != 0) {
+            refine = true;
+            break;
+          }
+          lo = std::min(lo, lum[n]);
+          hi = std::max(hi, lum[n]);
+        }
+      }
+      if (refine || hi - lo > 0.02f + 0.1f * hi) static_refine[at] = 1;
+    }
+  });
 }
 
 void PhotoScene::build_truth() {

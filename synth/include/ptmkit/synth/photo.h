@@ -54,7 +54,8 @@
 //     centre_projection_px (where the sphere's centre projects; differs from the outline's
 //     centre off-axis), outline_inside_frame (fraction of the outline inside the image),
 //     outline_visible (fraction inside the image and not hidden by the base or another
-//     object), base {radius_mm, top_mm (rim distance from the centre along "down")} or null,
+//     object), base {radius_mm (the cup holding the sphere), outer_radius_mm, top_mm (the rim's
+//     distance below the centre)} or null,
 //     mask ("truth/sphere_K.png"), highlight_px per image ([x, y] where mirror geometry puts
 //     the light's reflection, or null when it is hidden or outside the frame)
 //   "circle" is what a detector should report for a sphere: the centre of its projected
@@ -148,6 +149,10 @@ struct PhotoOptions {
   // height is the gap between the sphere and the ground) or on the floor (kSide).
   bool sphere_bases = true;
   double base_radius_frac = 0.6;
+  // The base's outer radius (fraction of the sphere's): wider than the sphere, a stand whose
+  // flat top (at the cup's rim) rings the sphere as seen from above; at most the cup's
+  // radius, a pedestal under it.
+  double base_outer_frac = 1.2;
   // The relief object on the ground at the image centre (kTopDown only), a square of this
   // side; its texture resolution follows the pixel scale.
   bool object = true;
