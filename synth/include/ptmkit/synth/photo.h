@@ -47,7 +47,7 @@
 //   generator, kind ("photo"), preset, seed, width, height
 //   camera: model "pinhole", focal_px, principal_px [x, y], view ("top-down" | "side"),
 //           frame (text)
-//   spheres: per sphere, left to right:
+//   spheres: per sphere, in the order of PhotoOptions::spheres (the presets: left to right):
 //     material ("black-glossy" | "chrome" | "glass"), centre_mm [x,y,z], radius_mm (camera
 //     frame), circle {centre_px [x,y], radius_px} (see below), ellipse {centre_px, semi_major_px,
 //     semi_minor_px, angle_deg (major axis from image x toward image y)},
@@ -62,10 +62,13 @@
 //   outline (an ellipse under a pinhole camera: the cone tangent to the sphere cut by the
 //   image plane) and the mean of the ellipse's semi-axes as radius. A circle fitted to the
 //   outline lands there to a few thousandths of a pixel at these ellipticities.
-//   distractor: {kind ("coin" | "dish" | "none"), centre_px, radius_px (outline circle),
-//               centre_mm, radius_mm}
+//   circle_definition: the sentence above, in words
+//   distractor: {kind ("coin" | "dish" | "none"), centre_px, radius_px (its outline's circle),
+//               offset_mm (on the ground from the point under the image centre: x right, y
+//               down), radius_mm}; only kind when none
+//   object: whether the relief is on the ground
 //   environment: {kind ("dark" | "lit"), windows, lamps, reflect_scene}
-//   lights: {count, file, light_radius_deg, light_irradiance}; images: per image
+//   lights: {count, file, frame, light_radius_deg, light_irradiance}; images: per image
 //           {file, light_dir [x,y,z] (light frame), elevation_deg}
 //   artefacts: {flare {on, spokes, strength, length_frac, angle_deg}, bloom {on, sigma_frac,
 //               strength}, vignetting {on, corner_loss}, noise {on, read_grey, shot_full_well}}
@@ -250,7 +253,7 @@ struct PhotoSphereTruth {
 };
 
 struct PhotoTruth {
-  std::vector<PhotoSphereTruth> spheres;  // left to right
+  std::vector<PhotoSphereTruth> spheres;  // in the order of PhotoOptions::spheres
   std::vector<Eigen::Vector3d> light_dirs;
   Eigen::Vector2d principal_px{0.0, 0.0};
   // The distractor's outline (zero radius when none).
