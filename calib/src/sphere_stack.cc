@@ -525,13 +525,16 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
       }
     }
     for (const Circle& rough : raw) {
-      // Refined on the stretched composites' edge; the one with the best rim kept.
+      // Refined on the stretched composites' edge. What stays still (the median, the
+      // reference photo) comes first: the maximum and mean also hold the moving highlights'
+      // flares. The first with a rim on 30% of the rays is kept, else the best.
       Circle best = rough;
       double best_rim = -1.0;
-      for (const Composite& comp : comps) {
+      for (const std::size_t k : {std::size_t{2}, std::size_t{3}, std::size_t{1}, std::size_t{0}}) {
+        if (k >= comps.size()) continue;
         int inside = 0;
         const std::vector<Eigen::Vector2d> e =
-            ray_edges(comp.smooth, rough.centre_px, rough.radius_px, &inside);
+            ray_edges(comps[k].smooth, rough.centre_px, rough.radius_px, &inside);
         if (inside < 90) continue;
         double rim = 0.0;
         const Circle c = consensus_circle(e, rough, &rim);
@@ -539,6 +542,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
           best_rim = rim;
           best = c;
         }
+        if (rim >= 0.3) break;
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
       const bool dup = std::any_of(all.begin(), all.end(), [&](const SphereCandidate& o) {
@@ -686,14 +690,25 @@ Located locate(const Window& win, const cv::Mat& base,
     }
     cv::Mat labels;
     const int k = cv::connectedComponents(clipped, labels, 8, CV_32S);
-    // The largest clipped component is the light's.
+    // The light's clipped component is the thickest (a streak may be longer, never thicker):
+    // the largest inscribed radius, then the larger area.
+    cv::Mat cpad, cdist;
+    cv::copyMakeBorder(clipped, cpad, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::distanceTransform(cpad, cdist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
     std::vector<int> area(static_cast<std::size_t>(k), 0);
+    std::vector<float> depth(static_cast<std::size_t>(k), 0.0f);
     for (int y = 0; y < l.rows; ++y) {
-      for (int x = 0; x < l.cols; ++x) ++area[static_cast<std::size_t>(labels.at<int>(y, x))];
+      for (int x = 0; x < l.cols; ++x) {
+        const auto j = static_cast<std::size_t>(labels.at<int>(y, x));
+        ++area[j];
+        depth[j] = std::max(depth[j], cdist.at<float>(y + 1, x + 1));
+      }
     }
     int best = 0;
     for (int j = 1; j < k; ++j) {
-      if (best == 0 || area[static_cast<std::size_t>(j)] > area[static_cast<std::size_t>(best)]) {
+      const auto jj = static_cast<std::size_t>(j), bb = static_cast<std::size_t>(best);
+      if (best == 0 || depth[jj] > depth[bb] + 0.25f ||
+          (std::abs(depth[jj] - depth[bb]) <= 0.25f && area[jj] > area[bb])) {
         best = j;
       }
     }
@@ -704,20 +719,28 @@ Located locate(const Window& win, const cv::Mat& base,
     cv::distanceTransform(padded, dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
     double dmax = 0.0;
     cv::minMaxLoc(dist, nullptr, &dmax);
-    cv::Mat core = region;
-    if (dmax >= 2.0) {
-      const int rad = std::max(1, static_cast<int>(std::floor(0.5 * dmax)));
-      const cv::Mat kernel =
-          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * rad + 1, 2 * rad + 1));
-      cv::Mat opened;
-      cv::morphologyEx(padded, opened, cv::MORPH_OPEN, kernel);
-      // The opened part holding the deepest point (streaks may leave stray pieces).
-      cv::Mat ol;
-      const int ko = cv::connectedComponents(opened, ol, 8, CV_32S);
-      cv::Point deep;
-      cv::minMaxLoc(dist, nullptr, nullptr, nullptr, &deep);
-      const int keep = ol.at<int>(deep);
-      if (ko > 1 && keep > 0) core = (ol == keep)(cv::Rect(1, 1, l.cols, l.rows));
+    cv::Point deep;
+    cv::minMaxLoc(dist, nullptr, nullptr, nullptr, &deep);
+    // Opening by half the core's inscribed radius (at least 1 px: a 3 x 3 disc removes
+    // streaks one pixel wide); a core smaller than that is the disc of its inscribed radius
+    // (plus a pixel) around its deepest point.
+    const int rad = std::max(1, static_cast<int>(std::floor(0.5 * dmax)));
+    const cv::Mat kernel =
+        cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * rad + 1, 2 * rad + 1));
+    cv::Mat opened;
+    cv::morphologyEx(padded, opened, cv::MORPH_OPEN, kernel);
+    cv::Mat ol;
+    cv::connectedComponents(opened, ol, 8, CV_32S);
+    const int keep = ol.at<int>(deep);
+    cv::Mat core;
+    if (keep > 0) {
+      const cv::Mat kept = ol == keep;
+      core = kept(cv::Rect(1, 1, l.cols, l.rows)).clone();
+    } else {
+      core = cv::Mat(l.rows, l.cols, CV_8U, cv::Scalar(0));
+      cv::circle(core, deep - cv::Point(1, 1), static_cast<int>(std::ceil(dmax)) + 1,
+                 cv::Scalar(255), cv::FILLED);
+      core &= region;
     }
     // Edge pixels weigh by how far the brightness climbs toward the clip level, so the
     // centroid moves smoothly rather than pixel by pixel.
