@@ -170,7 +170,7 @@ cv::Mat luma_plane(const Image& img) {
 
 // Contrast-stretched 8-bit copy: log brightness between the 1st and 99.5th percentiles, so a
 // black ball's faint rim on a black ground shows as well as a bright one.
-cv::Mat stretch8(const cv::Mat& f) {
+cv::Mat stretch(const cv::Mat& f, int type) {
   cv::Mat lg;
   cv::log(f + 1.0f / 255.0f, lg);
   std::vector<float> v;
@@ -182,8 +182,9 @@ cv::Mat stretch8(const cv::Mat& f) {
   std::sort(v.begin(), v.end());
   const float lo = v[v.size() / 100], hi = v[std::min(v.size() - 1, v.size() * 995 / 1000)];
   cv::Mat out;
-  lg.convertTo(out, CV_8U, 255.0 / std::max(1e-3f, hi - lo),
+  lg.convertTo(out, type, 255.0 / std::max(1e-3f, hi - lo),
                -255.0 * lo / std::max(1e-3f, hi - lo));
+  if (type == CV_32F) cv::min(cv::max(out, 0.0), 255.0, out);
   return out;
 }
 
@@ -380,9 +381,9 @@ struct Composite {
   cv::Mat smooth;  // the same, CV_32F grey levels, Gaussian sigma 1
 };
 
+// The 8-bit copy finds circles (Hough); the rim is measured on the unquantised one.
 Composite make_composite(std::string name, const cv::Mat& plane) {
-  Composite c{std::move(name), stretch8(plane), {}};
-  c.small8.convertTo(c.smooth, CV_32F);
+  Composite c{std::move(name), stretch(plane, CV_8U), stretch(plane, CV_32F)};
   cv::GaussianBlur(c.smooth, c.smooth, cv::Size(0, 0), 1.0);
   return c;
 }
@@ -743,17 +744,34 @@ Located locate(const Window& win, const cv::Mat& base,
       core &= region;
     }
     // Edge pixels weigh by how far the brightness climbs toward the clip level, so the
-    // centroid moves smoothly rather than pixel by pixel.
+    // centroid moves smoothly rather than pixel by pixel. An edge pixel that is clipped (the
+    // root of a streak) says nothing of the core's edge there: it takes the weight of the
+    // pixel opposite it across the core, as a round core would have.
     cv::Mat grown;
     cv::dilate(core, grown, cv::Mat());
+    const cv::Moments mo = cv::moments(core, true);
+    const Eigen::Vector2d c0 = mo.m00 > 0.0 ? Eigen::Vector2d(mo.m10 / mo.m00, mo.m01 / mo.m00)
+                                            : Eigen::Vector2d(deep.x - 1, deep.y - 1);
+    auto edge_weight = [&](int x, int y) {
+      const double v = l.at<float>(y, x) - base.at<float>(y, x);
+      return std::clamp(v / (0.98 * top - base.at<float>(y, x)), 0.0, 1.0);
+    };
     for (int y = 0; y < l.rows; ++y) {
       for (int x = 0; x < l.cols; ++x) {
         if (core.at<std::uint8_t>(y, x)) {
           samples.emplace_back(x + win.rect.x, y + win.rect.y, 1.0);
           ++out.pixels;
-        } else if (grown.at<std::uint8_t>(y, x) && region.at<std::uint8_t>(y, x) == 0) {
-          const double v = l.at<float>(y, x) - base.at<float>(y, x);
-          const double wgt = std::clamp(v / (0.98 * top - base.at<float>(y, x)), 0.0, 1.0);
+        } else if (grown.at<std::uint8_t>(y, x)) {
+          double wgt = 0.0;
+          if (region.at<std::uint8_t>(y, x) == 0) {
+            wgt = edge_weight(x, y);
+          } else {
+            const int ox = static_cast<int>(std::lround(2.0 * c0.x() - x));
+            const int oy = static_cast<int>(std::lround(2.0 * c0.y() - y));
+            const bool ok = ox >= 0 && oy >= 0 && ox < l.cols && oy < l.rows &&
+                            !core.at<std::uint8_t>(oy, ox) && !region.at<std::uint8_t>(oy, ox);
+            wgt = ok ? edge_weight(ox, oy) : 0.5;
+          }
           samples.emplace_back(x + win.rect.x, y + win.rect.y, wgt);
         }
       }
@@ -828,18 +846,20 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     out.candidates = find_candidates(ev, so, det.min_peak, rig.sphere_count, &small);
     // Full-resolution rim: the consensus circle on the photo-size composite where the rim
     // shows best (at scale 1 the analysis already was at full resolution).
-    std::vector<Composite> full;
-    if (ev.scale > 1) {
-      full.push_back(make_composite("stack's maximum", ev.full_max));
-      full.push_back(make_composite("stack's mean", ev.full_mean));
-      if (!ev.reference.empty()) full.push_back(make_composite("reference photo", ev.reference));
-    }
+    // Still composites first (the median exists at photo size only at scale 1).
+    std::vector<std::pair<std::string, const cv::Mat*>> planes;
+    if (ev.scale == 1) planes.emplace_back("stack's median", &ev.small_median);
+    if (!ev.reference.empty()) planes.emplace_back("reference photo", &ev.reference);
+    planes.emplace_back("stack's mean", &ev.full_mean);
+    planes.emplace_back("stack's maximum", &ev.full_max);
     for (const Circle& c : small) {
       Circle best = c;
       double best_rim = 0.0;
-      for (const Composite& comp : full) {
+      for (const auto& [name, plane] : planes) {
+        cv::Mat f = stretch(*plane, CV_32F);
+        cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
         int inside = 0;
-        const auto e = ray_edges(comp.smooth, c.centre_px, c.radius_px, &inside);
+        const auto e = ray_edges(f, c.centre_px, c.radius_px, &inside);
         double rim = 0.0;
         const Circle r = consensus_circle(e, c, &rim);
         if (rim > best_rim && (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
@@ -847,6 +867,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
           best_rim = rim;
           best = r;
         }
+        if (rim >= 0.3) break;
       }
       circles.push_back(best);
     }
