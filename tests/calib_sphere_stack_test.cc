@@ -14,6 +14,7 @@
 #include "ptmkit/calib/sphere_stack.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
+#include "ptmkit/core/light_set.h"
 #include "ptmkit/synth/rig.h"
 #include "test_util.h"
 
@@ -216,6 +217,72 @@ TEST(CalibSphereStack, OverlayDownscaleKeepsTheLongestSideWithinTheLimit) {
   EXPECT_DOUBLE_EQ(scale, 1.0);
 }
 
+TEST(CalibSphereStack, LargeSphereCutByTheFrameAndHiddenByItsBase) {
+  // The sphere fills most of the frame: its top 12 px are outside, a base covers its bottom.
+  Scene s;
+  s.lights = layout_directions("rings:30:8:10,50:6:20,70:4:30,90:1");
+  s.centre = {240.3, 190.6};
+  s.radius = 202.0;
+  synth::SphereRigOptions rig;
+  rig.width = 480;
+  rig.height = 400;
+  rig.centre_px = s.centre;
+  rig.radius_px = s.radius;
+  rig.background = 0.1;
+  rig.body = 0.02;
+  rig.highlight_supersample = 16;
+  rig.noise_grey = 1.0;
+  for (std::size_t i = 0; i < s.lights.size(); ++i) {
+    rig.light_dir = s.lights[i];
+    rig.seed = i + 7;
+    Image img = synth::render_sphere_rig(rig);
+    for (int y = 360; y < img.height(); ++y) {
+      for (int x = 170; x < 310; ++x) img.at(x, y, 0) = 0.3f;
+    }
+    s.images.push_back(std::move(img));
+    s.names.emplace_back("big" + std::to_string(i) + ".png");
+  }
+  const StackCalibration r = calibrate_sphere_stack(s.images, s.names, {});
+  expect_accurate(r, s, "large sphere, cut by the frame, on a base");
+}
+
+TEST(CalibSphereStack, CommandRefusesWeakEvidenceAndDrawsTheCandidates) {
+  test::ScratchDir dir;
+  Scene s = coin_scene(false);
+  std::vector<std::string> args{"calibrate", "sphere"};
+  for (std::size_t i = 0; i < s.images.size(); ++i) {
+    Image& img = s.images[i];
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - s.centre).norm() <= s.radius + 3) img.at(x, y, 0) = 0.08f;
+      }
+    }
+    const fs::path p = dir / s.names[i];
+    write_image(p, img.view());
+    args.push_back(p.string());
+  }
+  auto run = args;
+  run.insert(run.end(), {"-o", (dir / "lights.lp").string()});
+  const auto r = test::run_ptmkit(run);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("candidates"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "lights.lp"));
+  EXPECT_TRUE(fs::exists(dir / "lights.candidates.png"));
+  // Malformed hints are errors too, with no output.
+  for (const std::vector<std::string>& extra : {std::vector<std::string>{"--roi", "1,2,3"},
+                                                {"--roi", "10,10,0,5"},
+                                                {"--radius-range", "40"},
+                                                {"--radius-range", "50,10"}}) {
+    auto bad = args;
+    bad.insert(bad.end(), extra.begin(), extra.end());
+    bad.insert(bad.end(), {"-o", (dir / "bad.lp").string()});
+    const auto b = test::run_ptmkit(bad);
+    EXPECT_EQ(b.exit_code, 1) << extra[0] << " " << extra[1];
+    EXPECT_NE(b.err.find(extra[0]), std::string::npos) << b.err;
+    EXPECT_FALSE(fs::exists(dir / "bad.lp"));
+  }
+}
+
 std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {
   std::ifstream lf(root / "lights.txt");
   int n = 0;
@@ -260,6 +327,34 @@ TEST(CalibSphereStack, RealChromeSphereFoundWithoutAnyHint) {
       (found.rig.spheres[0].sphere.centre_px - with_mask.rig.spheres[0].sphere.centre_px).norm(),
       2.0);
   EXPECT_LE(mean_found, mean_masked + 0.25);
+}
+
+}  // namespace
+}  // namespace ptmkit::calib
+
+namespace ptmkit::calib {
+namespace {
+
+TEST(CalibSphereStack, CommandCalibratesTheRealChromeSphereWithoutHints) {
+  const auto root = test::shared_data("uw-psm");
+  if (!root) GTEST_SKIP() << "../shared/data/uw-psm is absent";
+  test::ScratchDir dir;
+  std::vector<std::string> args{"calibrate", "sphere"};
+  for (int i = 0; i < 12; ++i) {
+    args.push_back((*root / "chrome" / ("chrome." + std::to_string(i) + ".png")).string());
+  }
+  args.insert(args.end(),
+              {"-o", (dir / "chrome.lp").string(), "--report", (dir / "chrome.json").string(),
+               "--overlays", (dir / "ov").string(), "--overlay-max-side", "256"});
+  const auto r = test::run_ptmkit(args);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("found, score"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("12 of 12 lights usable"), std::string::npos) << r.out;
+  EXPECT_EQ(read_lp(dir / "chrome.lp").size(), 12u);
+  const auto overlays = test::list_files(dir / "ov");
+  ASSERT_EQ(overlays.size(), 12u);
+  const ImageInfo info = probe_image(dir / "ov" / overlays.front());
+  EXPECT_LE(std::max(info.width, info.height), 256);
 }
 
 }  // namespace
