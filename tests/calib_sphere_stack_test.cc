@@ -15,6 +15,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/parallel.h"
 #include "ptmkit/synth/rig.h"
 #include "test_util.h"
 
@@ -244,6 +245,67 @@ TEST(CalibSphereStack, LargeSphereCutByTheFrameAndHiddenByItsBase) {
   }
   const StackCalibration r = calibrate_sphere_stack(s.images, s.names, {});
   expect_accurate(r, s, "large sphere, cut by the frame, on a base");
+}
+
+TEST(CalibSphereStack, TwoSpheresWithACoinBetweenThem) {
+  // Two black glossy spheres (radius 110 and 60 px) left and top right, the coin between.
+  Scene left = coin_scene(false);
+  synth::SphereRigOptions rig;
+  rig.width = 560;
+  rig.height = 400;
+  rig.centre_px = {490.0, 75.0};
+  rig.radius_px = 60.0;
+  rig.background = 0.08;
+  rig.body = 0.02;
+  rig.light_radius_deg = 1.0;
+  rig.highlight_supersample = 16;
+  rig.noise_grey = 1.0;
+  std::vector<Image> images;
+  for (std::size_t i = 0; i < left.images.size(); ++i) {
+    rig.light_dir = left.lights[i];
+    rig.seed = 100 + i;
+    const Image right = synth::render_sphere_rig(rig);
+    Image img = left.images[i];
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - rig.centre_px).norm() <= rig.radius_px + 2.0) {
+          img.at(x, y, 0) = right.at(x, y, 0);
+        }
+      }
+    }
+    images.push_back(std::move(img));
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  const StackCalibration r = calibrate_sphere_stack(images, left.names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  EXPECT_LE((r.rig.spheres[0].sphere.centre_px - left.centre).norm(), 0.5);
+  EXPECT_LE((r.rig.spheres[1].sphere.centre_px - rig.centre_px).norm(), 0.5);
+  EXPECT_LE(std::abs(r.rig.spheres[1].sphere.radius_px - rig.radius_px), 0.005 * rig.radius_px);
+  double mean = 0.0, max = 0.0;
+  for (std::size_t i = 0; i < left.lights.size(); ++i) {
+    EXPECT_TRUE(r.rig.lights[i].found) << r.rig.lights[i].flag;
+    const double a = angle_deg(r.rig.lights[i].direction, left.lights[i]);
+    mean += a / static_cast<double>(left.lights.size());
+    max = std::max(max, a);
+  }
+  std::printf("two spheres and a coin: lights mean %.3f max %.3f deg\n", mean, max);
+  EXPECT_LE(mean, 0.2);
+  EXPECT_LE(max, 1.0);
+}
+
+TEST(CalibSphereStack, SameResultWithOneOrTwoThreads) {
+  const Scene s = coin_scene(true);
+  StackCalibration one, two;
+  {
+    const ThreadLimit limit(1);
+    one = calibrate_sphere_stack(s.images, s.names, {});
+  }
+  {
+    const ThreadLimit limit(2);
+    two = calibrate_sphere_stack(s.images, s.names, {});
+  }
+  EXPECT_EQ(one.to_json(), two.to_json());
 }
 
 TEST(CalibSphereStack, CommandRefusesWeakEvidenceAndDrawsTheCandidates) {

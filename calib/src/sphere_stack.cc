@@ -121,22 +121,31 @@ Evidence gather(const Source& src, int max_side) {
   ev.full_mean = cv::Mat(ev.h, ev.w, CV_32F, cv::Scalar(0.0f));
   const float inv_n = 1.0f / static_cast<float>(ev.n);
   src.scan([&](const StackBand& band) {
-    // Rows of the band in parallel; each row's sums in a fixed order, so any thread count
-    // gives the same bits. Block maxima are order-free.
+    // The photo-size planes by rows (each pixel's sum over the images in their order), the
+    // analysis copies by image (each its own array): no two threads write one value, and any
+    // thread count gives the same bits.
     tbb::parallel_for(0, band.rows, [&](int r) {
       const int y = band.y0 + r;
       float* mx = ev.full_max.ptr<float>(y);
       float* mean = ev.full_mean.ptr<float>(y);
-      const std::size_t srow = static_cast<std::size_t>(y / ev.scale) * ev.sw;
       for (int i = 0; i < band.images; ++i) {
-        std::uint16_t* small = ev.small[static_cast<std::size_t>(i)].data() + srow;
         for (int x = 0; x < band.width; ++x) {
           const float v = band_luma(band, i, r, x);
           mx[x] = std::max(mx[x], v);
           mean[x] += v * inv_n;
+        }
+      }
+    });
+    tbb::parallel_for(0, band.images, [&](int i) {
+      for (int r = 0; r < band.rows; ++r) {
+        const int y = band.y0 + r;
+        std::uint16_t* small = ev.small[static_cast<std::size_t>(i)].data() +
+                               static_cast<std::size_t>(y / ev.scale) * ev.sw;
+        for (int x = 0; x < band.width; ++x) {
+          const float v = band_luma(band, i, r, x);
           const auto q = static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 65535));
-          std::uint16_t& s = small[x / ev.scale];
-          s = std::max(s, q);
+          std::uint16_t& sv = small[x / ev.scale];
+          sv = std::max(sv, q);
         }
       }
     });
@@ -182,8 +191,7 @@ cv::Mat stretch(const cv::Mat& f, int type) {
   std::sort(v.begin(), v.end());
   const float lo = v[v.size() / 100], hi = v[std::min(v.size() - 1, v.size() * 995 / 1000)];
   cv::Mat out;
-  lg.convertTo(out, type, 255.0 / std::max(1e-3f, hi - lo),
-               -255.0 * lo / std::max(1e-3f, hi - lo));
+  lg.convertTo(out, type, 255.0 / std::max(1e-3f, hi - lo), -255.0 * lo / std::max(1e-3f, hi - lo));
   if (type == CV_32F) cv::min(cv::max(out, 0.0), 255.0, out);
   return out;
 }
