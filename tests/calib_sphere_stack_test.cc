@@ -16,6 +16,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
+#include "ptmkit/synth/photo.h"
 #include "ptmkit/synth/rig.h"
 #include "test_util.h"
 
@@ -343,6 +344,49 @@ TEST(CalibSphereStack, CommandRefusesWeakEvidenceAndDrawsTheCandidates) {
     EXPECT_NE(b.err.find(extra[0]), std::string::npos) << b.err;
     EXPECT_FALSE(fs::exists(dir / "bad.lp"));
   }
+}
+
+// The photographic render (synth/photo.h): two black glossy spheres on cups beside the
+// object, a coin, a dark room with windows and lamps reflected, flare, bloom, vignetting and
+// noise all on; 8 of the preset's lights to keep the test short.
+TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-dome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth& truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("photo" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = truth.spheres[k].outline;
+    std::printf("photo-dome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
+                (c.centre_px - t.centre_px).norm(),
+                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+    // Never the coin.
+    EXPECT_GT((c.centre_px - truth.distractor_centre_px).norm(), truth.distractor_radius_px);
+  }
+  double mean = 0.0, max = 0.0;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    EXPECT_TRUE(r.rig.lights[i].found) << i << ": " << r.rig.lights[i].flag;
+    const double a = angle_deg(r.rig.lights[i].direction, truth.light_dirs[i]);
+    mean += a / static_cast<double>(truth.light_dirs.size());
+    max = std::max(max, a);
+  }
+  // Measured, not yet at the 0.2 / 1 degree target on these renders (docs/CALIBRATION.md);
+  // bounded here at what a wrong highlight or circle would exceed many times over.
+  std::printf("photo-dome lights: mean %.3f max %.3f deg\n", mean, max);
+  EXPECT_LE(max, 1.0);
 }
 
 std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {

@@ -461,7 +461,9 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
     if (alone) ++out.distinct_spots;
   }
   out.track = static_cast<double>(out.distinct_spots) / ev.n;
-  out.score = 0.3 * out.rim + 0.7 * out.track;
+  // A circle needs a rim (a third of the rays make it a full one) and a track: either alone
+  // is no sphere (a coin has a rim, any circle around the highlights has their track).
+  out.score = std::min(1.0, out.rim / 0.3) * out.track;
   return out;
 }
 

@@ -19,7 +19,9 @@
 //           and lies at its own place: a mirror sphere shows each light at a different point
 //           of one circle; a coin, dish or lens glints at the same few places or lights up
 //           as a whole, so its track is short
-//   score   0.3 rim + 0.7 track
+//   score   min(1, rim / 0.3) x track: a rim on a third of the rays counts as a full rim;
+//           neither a rim alone (a coin) nor a track alone (any circle drawn around the
+//           highlights) makes a sphere
 // The `sphere_count` best non-overlapping candidates with score >= min_score are taken;
 // otherwise SphereSearchError lists every candidate and its evidence, and nothing is written.
 //
