@@ -389,6 +389,41 @@ TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
   EXPECT_LE(max, 1.0);
 }
 
+// Chrome spheres with a glazed dish beside them: the dish's glint moves with the light too,
+// but does not reflect the lights as the spheres do, so it is refused.
+TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-chrome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth& truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("chrome" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = truth.spheres[k].outline;
+    std::printf("photo-chrome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
+                (c.centre_px - t.centre_px).norm(),
+                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+  }
+  for (const SphereCandidate& c : r.candidates) {
+    if ((c.circle.centre_px - truth.distractor_centre_px).norm() <
+        0.5 * truth.distractor_radius_px) {
+      EXPECT_FALSE(c.chosen) << "the dish was taken: " << c.note;
+    }
+  }
+}
+
 std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {
   std::ifstream lf(root / "lights.txt");
   int n = 0;

@@ -442,12 +442,14 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   // The track: per image the brightest moving spot inside, compact; distinct places.
   const double disc = std::numbers::pi * c.radius_px * c.radius_px;
   std::vector<Eigen::Vector2d> places;
+  out.spots_px.assign(static_cast<std::size_t>(ev.n), std::nullopt);
   for (int i = 0; i < ev.n; ++i) {
     const std::vector<Spot> spots = moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
     if (spots.empty()) continue;
     const Spot& s = spots.front();
-    if (s.area > std::max(0.02 * disc, 4.0)) continue;
+    if (s.area > std::max(0.1 * disc, 4.0)) continue;
     places.push_back(s.centre_small);
+    out.spots_px[static_cast<std::size_t>(i)] = s.centre_small;
   }
   out.moving_spots = static_cast<int>(places.size());
   // A place is distinct when no other image's spot is within 1.5 analysis pixels (or 2% of
@@ -496,7 +498,7 @@ Circle to_photo(const Circle& small, int scale) {
 }
 
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
-                                             double min_peak, int count,
+                                             double min_peak, int count, const SphereCamera& camera,
                                              std::vector<Circle>* chosen_photo) {
   std::vector<Composite> comps;
   comps.push_back(make_composite("stack's maximum", ev.small_max));
@@ -574,24 +576,92 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
     sorted.push_back(all[k]);
     sorted_region.push_back(region_of[k]);
   }
-  // Take: one per box, or the `count` best that do not overlap.
+  for (SphereCandidate& c : sorted) {
+    c.circle = to_photo(c.circle, ev.scale);
+    for (auto& p : c.spots_px) {
+      if (p) *p = *p * ev.scale + Eigen::Vector2d::Constant(0.5 * (ev.scale - 1));
+    }
+  }
+  auto overlap = [](const SphereCandidate& a, const SphereCandidate& b) {
+    return (a.circle.centre_px - b.circle.centre_px).norm() <
+           a.circle.radius_px + b.circle.radius_px;
+  };
+  // Agreement of two candidates: the share of their common images whose spots reflect the
+  // same light (within the tolerance), 0 with fewer than 3 common images.
+  const double tol_deg = camera.focal_px > 0.0 ? 20.0 : 30.0;
+  auto agree = [&](const SphereCandidate& a, const SphereCandidate& b) {
+    int common = 0, same = 0;
+    for (std::size_t i = 0; i < a.spots_px.size(); ++i) {
+      if (!a.spots_px[i] || !b.spots_px[i]) continue;
+      ++common;
+      const Eigen::Vector3d la = reflect_highlight(a.circle, camera, *a.spots_px[i], ev.w, ev.h);
+      const Eigen::Vector3d lb = reflect_highlight(b.circle, camera, *b.spots_px[i], ev.w, ev.h);
+      const double ang = std::acos(std::clamp(la.dot(lb), -1.0, 1.0)) * 180.0 / std::numbers::pi;
+      if (ang <= tol_deg) ++same;
+    }
+    return common >= 3 ? static_cast<double>(same) / common : 0.0;
+  };
+  // Take: one per box, or the `count` best that do not overlap (for two or three spheres, the
+  // best agreeing set).
   const int want = boxes ? static_cast<int>(regions.size()) : count;
   std::vector<bool> region_done(regions.size(), false);
   int taken = 0;
-  for (std::size_t k = 0; k < sorted.size() && taken < want; ++k) {
-    SphereCandidate& c = sorted[k];
-    if (c.score < opt.min_score) break;
-    if (boxes && region_done[static_cast<std::size_t>(sorted_region[k])]) continue;
-    const bool overlaps =
-        std::any_of(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
-                    [&](const SphereCandidate& o) {
-                      return o.chosen && (o.circle.centre_px - c.circle.centre_px).norm() <
-                                             o.circle.radius_px + c.circle.radius_px;
-                    });
-    if (overlaps) continue;
-    c.chosen = true;
-    if (boxes) region_done[static_cast<std::size_t>(sorted_region[k])] = true;
-    ++taken;
+  if (!boxes && (want == 2 || want == 3)) {
+    std::vector<std::size_t> pool;
+    for (std::size_t k = 0; k < sorted.size() && pool.size() < 10; ++k) {
+      if (sorted[k].score >= opt.min_score) pool.push_back(k);
+    }
+    double best_value = 0.0;
+    std::vector<std::size_t> best_set;
+    std::vector<std::size_t> set;
+    const std::function<void(std::size_t)> search = [&](std::size_t from) {
+      if (static_cast<int>(set.size()) == want) {
+        double worst = 1.0, sum = 0.0;
+        for (std::size_t x = 0; x < set.size(); ++x) {
+          sum += sorted[set[x]].score;
+          for (std::size_t y = x + 1; y < set.size(); ++y) {
+            worst = std::min(worst, agree(sorted[set[x]], sorted[set[y]]));
+          }
+        }
+        if (worst >= 0.5 && sum * worst > best_value) {
+          best_value = sum * worst;
+          best_set = set;
+        }
+        return;
+      }
+      for (std::size_t q = from; q < pool.size(); ++q) {
+        const bool clash = std::any_of(set.begin(), set.end(), [&](std::size_t k) {
+          return overlap(sorted[k], sorted[pool[q]]);
+        });
+        if (clash) continue;
+        set.push_back(pool[q]);
+        search(q + 1);
+        set.pop_back();
+      }
+    };
+    search(0);
+    for (std::size_t k : best_set) sorted[k].chosen = true;
+    taken = static_cast<int>(best_set.size());
+    if (taken < want) {
+      for (std::size_t k : pool) sorted[k].note += "; no set of spheres whose highlights agree";
+    } else {
+      for (std::size_t k : pool) {
+        if (!sorted[k].chosen) sorted[k].note += "; its spots disagree with the spheres taken";
+      }
+    }
+  } else {
+    for (std::size_t k = 0; k < sorted.size() && taken < want; ++k) {
+      SphereCandidate& c = sorted[k];
+      if (c.score < opt.min_score) break;
+      if (boxes && region_done[static_cast<std::size_t>(sorted_region[k])]) continue;
+      const bool overlaps =
+          std::any_of(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
+                      [&](const SphereCandidate& o) { return o.chosen && overlap(o, c); });
+      if (overlaps) continue;
+      c.chosen = true;
+      if (boxes) region_done[static_cast<std::size_t>(sorted_region[k])] = true;
+      ++taken;
+    }
   }
   for (SphereCandidate& c : sorted) {
     if (!c.chosen) {
@@ -600,7 +670,6 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
       if (c.track < 0.3 && c.rim >= 0.5)
         c.note += " (round, but its bright spots do not move like a sphere's)";
     }
-    c.circle = to_photo(c.circle, ev.scale);
   }
   if (taken < want) {
     std::string msg =
@@ -853,7 +922,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   const bool detected = circles.empty();
   if (detected) {
     std::vector<Circle> small;
-    out.candidates = find_candidates(ev, so, det.min_peak, rig.sphere_count, &small);
+    out.candidates = find_candidates(ev, so, det.min_peak, rig.sphere_count, det.camera, &small);
     // Full-resolution rim: the consensus circle on the photo-size composite where the rim
     // shows best (at scale 1 the analysis already was at full resolution).
     // Still composites first (the median exists at photo size only at scale 1).

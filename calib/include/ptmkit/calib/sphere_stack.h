@@ -22,7 +22,11 @@
 //   score   min(1, rim / 0.3) x track: a rim on a third of the rays counts as a full rim;
 //           neither a rim alone (a coin) nor a track alone (any circle drawn around the
 //           highlights) makes a sphere
-// The `sphere_count` best non-overlapping candidates with score >= min_score are taken;
+// The `sphere_count` best non-overlapping candidates with score >= min_score are taken; for
+// two or more spheres, the set (of the ten best) whose spots agree: every pair sees most
+// common images' light within 20 degrees (pinhole; 30 orthographic), the set with the highest
+// sum of scores times its worst pair's agreement (a dish's or coin's moving glint does not
+// reflect the lights as the spheres do);
 // otherwise SphereSearchError lists every candidate and its evidence, and nothing is written.
 //
 // The highlight of a light on a sphere: the moving spots in the circle (the image minus the
@@ -83,6 +87,8 @@ struct SphereCandidate {
   int distinct_spots = 0;  // of those, at their own place
   bool chosen = false;
   std::string note;  // why refused, or where it came from
+  // Per image, the brightest moving spot inside (photo pixels), if compact.
+  std::vector<std::optional<Eigen::Vector2d>> spots_px;
 };
 
 struct StackCalibration {
