@@ -199,6 +199,21 @@ TEST(CalibSphereStack, HintsNarrowTheSearchAndBadHintsAreErrors) {
   r.search.min_radius_px = 20.0;
   r.search.max_radius_px = 40.0;
   EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, r), SphereSearchError);
+  // A reference photo in room light (here: the sphere and coin lit evenly) adds its rim.
+  test::ScratchDir dir;
+  Image room(560, 400, 1, ColourSpace::kLinear, 0.4f);
+  for (int y = 0; y < room.height(); ++y) {
+    for (int x = 0; x < room.width(); ++x) {
+      if ((Eigen::Vector2d(x, y) - s.centre).norm() <= s.radius) room.at(x, y, 0) = 0.1f;
+    }
+  }
+  write_image(dir / "room.png", room.view());
+  StackCalibrationOptions ref;
+  ref.search.reference = dir / "room.png";
+  expect_accurate(calibrate_sphere_stack(s.images, s.names, ref), s, "reference photo");
+  write_image(dir / "small.png", Image(100, 80, 1, ColourSpace::kLinear, 0.4f).view());
+  ref.search.reference = dir / "small.png";
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, ref), Error);
   StackCalibrationOptions bad;
   bad.search.rois = {{2000, 2000, 50, 50}};
   EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, bad), Error);
