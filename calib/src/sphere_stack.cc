@@ -179,9 +179,13 @@ cv::Mat luma_plane(const Image& img) {
 
 // Contrast-stretched 8-bit copy: log brightness between the 1st and 99.5th percentiles, so a
 // black ball's faint rim on a black ground shows as well as a bright one.
-cv::Mat stretch(const cv::Mat& f, int type) {
+cv::Mat stretch(const cv::Mat& f, int type, bool logarithm = true) {
   cv::Mat lg;
-  cv::log(f + 1.0f / 255.0f, lg);
+  if (logarithm) {
+    cv::log(f + 1.0f / 255.0f, lg);
+  } else {
+    lg = f;
+  }
   std::vector<float> v;
   v.reserve(f.total() / 7 + 1);
   for (int y = 0; y < lg.rows; y += 3) {
@@ -623,8 +627,11 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
             worst = std::min(worst, agree(sorted[set[x]], sorted[set[y]]));
           }
         }
-        if (worst >= 0.5 && sum * worst > best_value) {
-          best_value = sum * worst;
+        // Agreement weighs the choice but refuses nothing alone: near lights (a small dome)
+        // are seen along different directions by spheres far apart.
+        const double value = sum * (0.5 + 0.5 * worst);
+        if (value > best_value) {
+          best_value = value;
           best_set = set;
         }
         return;
@@ -934,19 +941,29 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     for (const Circle& c : small) {
       Circle best = c;
       double best_rim = 0.0;
-      for (const auto& [name, plane] : planes) {
-        cv::Mat f = stretch(*plane, CV_32F);
-        cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
-        int inside = 0;
-        const auto e = ray_edges(f, c.centre_px, c.radius_px, &inside);
-        double rim = 0.0;
-        const Circle r = consensus_circle(e, c, &rim);
-        if (rim > best_rim && (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
-            std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {
-          best_rim = rim;
-          best = r;
+      // Linear brightness first: the logarithm shows a faint rim but moves a clear one's
+      // steepest point toward its dark side.
+      bool done = false;
+      for (const bool logarithm : {false, true}) {
+        for (const auto& [name, plane] : planes) {
+          cv::Mat f = stretch(*plane, CV_32F, logarithm);
+          cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
+          int inside = 0;
+          const auto e = ray_edges(f, c.centre_px, c.radius_px, &inside);
+          double rim = 0.0;
+          const Circle r = consensus_circle(e, c, &rim);
+          if (rim > best_rim &&
+              (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
+              std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {
+            best_rim = rim;
+            best = r;
+          }
+          if (rim >= 0.3) {
+            done = true;
+            break;
+          }
         }
-        if (rim >= 0.3) break;
+        if (done) break;
       }
       circles.push_back(best);
     }

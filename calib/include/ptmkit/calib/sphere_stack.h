@@ -23,10 +23,10 @@
 //           neither a rim alone (a coin) nor a track alone (any circle drawn around the
 //           highlights) makes a sphere
 // The `sphere_count` best non-overlapping candidates with score >= min_score are taken; for
-// two or more spheres, the set (of the ten best) whose spots agree: every pair sees most
-// common images' light within 20 degrees (pinhole; 30 orthographic), the set with the highest
-// sum of scores times its worst pair's agreement (a dish's or coin's moving glint does not
-// reflect the lights as the spheres do);
+// two or three spheres, of the ten best the set with the highest sum of scores times
+// (1 + agreement) / 2, agreement = its worst pair's share of common images whose spots reflect
+// lights within 20 degrees of each other (pinhole; 30 orthographic): a dish's or coin's moving
+// glint does not reflect the lights as the spheres do, while near lights only lower it;
 // otherwise SphereSearchError lists every candidate and its evidence, and nothing is written.
 //
 // The highlight of a light on a sphere: the moving spots in the circle (the image minus the
