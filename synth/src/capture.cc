@@ -251,6 +251,9 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
   report.height = scene.height;
   auto written = [&](const fs::path& p) { report.files.push_back(p); };
 
+  // Committed as a whole: the images, lights.lp and truth reach the folder together once all
+  // are written; a failure leaves the folder as it was.
+  OutputTransaction outputs;
   ensure_directory(out_dir);
   const fs::path truth_dir = out_dir / "truth";
   nlohmann::json truth_files = nlohmann::json::object();
@@ -442,6 +445,7 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
     written(json_path);
   }
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  outputs.commit();
   return report;
 }
 
