@@ -17,6 +17,7 @@
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -351,8 +352,10 @@ std::vector<std::uint8_t> read_bytes(const fs::path& path, std::size_t limit) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(where(path) + ": no such file");
   if (fs::is_directory(path, ec)) throw Error(where(path) + ": is a folder, expected a .ptm file");
-  const std::uintmax_t size = fs::file_size(path, ec);
-  if (ec) throw Error(where(path) + ": cannot read: " + ec.message());
+  // Regular files only (a device never ends), read only if they fit in memory.
+  const std::uintmax_t size =
+      checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".ptm file");
+  check_allocation(path, std::min<std::uintmax_t>(size, limit), "the file's bytes");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(where(path) + ": cannot open for reading");
   std::vector<std::uint8_t> bytes(static_cast<std::size_t>(std::min<std::uintmax_t>(size, limit)));
@@ -400,6 +403,14 @@ PtmFile read_ptm_file(const fs::path& path) {
                 std::to_string(h.height) + " " + std::string(to_string(h.format)) + " needs " +
                 std::to_string(expected) + " bytes after the header, found " +
                 std::to_string(present));
+  }
+  if (present > expected) {
+    // Not tolerated: a header line too many or a wrong declared size shifts every texel.
+    throw Error(where(path) + ": " + std::to_string(present - expected) +
+                " bytes after the binary block: " + std::to_string(h.width) + " x " +
+                std::to_string(h.height) + " " + std::string(to_string(h.format)) + " needs " +
+                std::to_string(expected) +
+                " (a damaged file, or a header that does not describe the data)");
   }
   PtmFile f;
   f.version = h.version;
@@ -525,6 +536,10 @@ PtmFile encode_ptm(const CoefficientMap& map, const PtmWriteOptions& options,
 PtmWriteReport write_ptm(const fs::path& path, const CoefficientMap& map,
                          const PtmWriteOptions& options) {
   PtmWriteReport report;
+  if (map.width > 0 && !map.coeffs.empty()) {
+    check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width,
+                       polynomial_count(map.model) * kPtmTerms);
+  }
   PtmFile file;
   try {
     file = encode_ptm(map, options, &report);

@@ -22,6 +22,7 @@
 #include "ptm_internal.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/texture/ptm.h"
 
 namespace ptmkit::texture {
@@ -527,7 +528,13 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
     s.lo[static_cast<std::size_t>(i)] = range.lo[static_cast<std::size_t>(i)] + 0.0f;
     s.hi[static_cast<std::size_t>(i)] = range.hi[static_cast<std::size_t>(i)] + 0.0f;
   }
-  if (!range.finite) s.finite = false;
+  if (!range.finite) {
+    // Name the texel (the inputs, not their half-float rounding, are what is wrong).
+    const int per_texel = polynomial_count(s.model) * kPtmTerms;
+    check_coefficients(path_, coeffs, band_texels * static_cast<std::size_t>(per_texel), s.width,
+                       per_texel, y0);
+    s.finite = false;
+  }
   if (s.model == ColourModel::kLRGB) {
     std::uint8_t* rgb = s.rgb.data() + first * 3;
     colour_bytes(colour, band_texels * 3, rgb);

@@ -12,6 +12,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -62,6 +63,7 @@ RtiWriteReport write_rti(const fs::path& path, const RtiMap& map) {
   if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * t) {
     throw Error(where(path) + ": the map's size does not match its coefficients");
   }
+  check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width, 3 * t);
   // Per term: the range over every texel and channel.
   std::vector<float> lo(t, std::numeric_limits<float>::infinity());
   std::vector<float> hi(t, -std::numeric_limits<float>::infinity());
@@ -130,7 +132,7 @@ std::vector<long long> parse_ints(const fs::path& path, const std::string& line,
   std::string rest;
   in >> rest;
   if (static_cast<int>(v.size()) != expected || !rest.empty()) {
-    throw Error(where(path) + ": expected " + what + ", got '" + line + "'");
+    throw Error(where(path) + ": expected " + what + ", got '" + excerpt(line) + "'");
   }
   return v;
 }
@@ -138,6 +140,10 @@ std::vector<long long> parse_ints(const fs::path& path, const std::string& line,
 }  // namespace
 
 RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
+  // Regular files only (a device never ends), read only if they fit in memory.
+  const std::uintmax_t file_bytes =
+      checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".rti file");
+  check_allocation(path, file_bytes, "the file's bytes");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw Error(where(path) + ": cannot open the file");
   const std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
@@ -178,14 +184,28 @@ RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
   }
   const int w = static_cast<int>(size[0]);
   const int h = static_cast<int>(size[1]);
-  RtiMap map(w, h, t, colour_space);
+  // The declared size is checked against the bytes present and the memory available before
+  // the map is allocated (a short file must not cost gigabytes).
   const std::size_t floats = 2 * sizeof(float) * static_cast<std::size_t>(t);
-  const std::size_t expected = floats + map.coeffs.size();
+  const std::uint64_t coeff_count =
+      checked_multiply(path, static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h),
+                       3 * static_cast<std::uint64_t>(t));
+  const std::uint64_t expected = floats + coeff_count;
   const std::size_t present = data.size() - pos;
   if (present < expected) {
-    throw Error(where(path) + ": the binary block is too short: expected " +
+    throw Error(where(path) + ": the binary block is too short: " + std::to_string(w) + " x " +
+                std::to_string(h) + " x " + std::to_string(t) + " terms need " +
                 std::to_string(expected) + " bytes, found " + std::to_string(present));
   }
+  if (present > expected) {
+    throw Error(where(path) + ": " + std::to_string(present - expected) +
+                " bytes after the binary block (a damaged file, or a header that does not "
+                "describe it)");
+  }
+  check_allocation(path, checked_multiply(path, coeff_count, sizeof(float)),
+                   "the " + std::to_string(w) + " x " + std::to_string(h) + " x " +
+                       std::to_string(t) + "-term coefficients");
+  RtiMap map(w, h, t, colour_space);
   std::vector<float> scale(t), bias(t);
   std::memcpy(scale.data(), data.data() + pos, sizeof(float) * t);
   std::memcpy(bias.data(), data.data() + pos + sizeof(float) * t, sizeof(float) * t);

@@ -78,7 +78,7 @@ struct PtmInfo {
   std::size_t header_bytes = 0;    // text header, including its last line end
   std::size_t data_bytes = 0;      // binary block the header implies
   std::size_t file_bytes = 0;      // size on disk
-  std::size_t trailing_bytes = 0;  // bytes after the binary block (kept, see PtmFile)
+  std::size_t trailing_bytes = 0;  // bytes after the binary block (read_ptm_file refuses them)
 
   // Bytes per texel in the file: 18 for RGB, 9 for LRGB.
   [[nodiscard]] int bytes_per_texel() const;
@@ -93,8 +93,8 @@ struct PtmFile {
   PtmQuantisation quantisation;
   // The binary block in file order (bottom-up rows; planar for 1.2, interleaved for 1.1).
   std::vector<std::uint8_t> data;
-  // Bytes found after the binary block. Tolerated on reading (some writers pad files) and
-  // written back unchanged, so that read -> write is bit-exact.
+  // Bytes written after the binary block. Always empty from read_ptm_file (which refuses a file
+  // with bytes after its block); write_ptm_file writes them after the block.
   std::vector<std::uint8_t> trailing;
   // The header text exactly as read (including its last line end). write_ptm_file writes it
   // verbatim when it still says what the fields above say (so foreign spacing, CRLF and
@@ -116,13 +116,15 @@ struct PtmFile {
 
 // Reads a whole file. Accepted: any whitespace between header items (spaces, tabs, line
 // breaks, CRLF; scales or biases split across lines), trailing spaces on the last header
-// line, bytes after the binary block (kept in `trailing`). Errors (ptmkit::Error naming the
+// line. Errors (ptmkit::Error naming the
 // file and the problem): a missing or unreadable file, a wrong magic, an unsupported version
 // or format (compressed and palette formats, PTM 1.1 RGB), a non-numeric, non-positive or
 // absurd width or height (each at most kMaxPtmSide, W*H at most kMaxPtmTexels), a NaN,
 // infinite or zero scale, a bias that is not an integer in 0..255, a header whose last line
-// is not terminated, and a binary block shorter than the header implies (expected and present
-// byte counts given). Negative scales are accepted: the format allows them.
+// is not terminated, a binary block shorter or longer than the header implies (expected and
+// present byte counts given: bytes after the block mean the header does not describe the data,
+// e.g. a duplicated header line), a path that is not a regular file, and a file larger than
+// the memory available. Negative scales are accepted: the format allows them.
 [[nodiscard]] PtmFile read_ptm_file(const std::filesystem::path& path);
 // The header only (the binary block's presence is not checked; file_bytes says how much is
 // there).
