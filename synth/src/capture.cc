@@ -15,6 +15,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/core/plane.h"
 #include "ptmkit/synth/synth.h"
 #include "render.h"
@@ -198,7 +199,7 @@ std::vector<Eigen::Vector3d> resolve_lights(const SynthOptions& o) {
   } else if (fs::path(o.lights).extension() == ".lp") {
     dirs = read_lp(o.lights).directions();
   } else {
-    throw Error("synth: unknown light layout '" + o.lights +
+    throw Error("synth: unknown light layout '" + excerpt(o.lights) +
                 "' (expected icosa, dome49, rings:ELEV:COUNT[:AZ],... or an .lp file)");
   }
   require(!dirs.empty(), "no lights in '" + o.lights + "'");
