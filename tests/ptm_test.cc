@@ -616,7 +616,7 @@ TEST(PtmStream, MisuseAndBadValuesLeaveNoFile) {
 
 // Over an existing output the writer first drops that file's cached pages: the file must end
 // up replaced by the new map, a failed run must leave the old bytes as they were, and a FIFO at
-// the path must not make the writer wait for a writer of its own.
+// the path must neither make the writer wait for a writer of its own nor be replaced.
 TEST(PtmStream, ReplacesAnExistingOutputAndKeepsItOnFailure) {
   test::ScratchDir dir;
   const auto bytes = [](const fs::path& p) {
@@ -656,11 +656,11 @@ TEST(PtmStream, ReplacesAnExistingOutputAndKeepsItOnFailure) {
   const fs::path fifo = dir / "fifo.ptm";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   {
+    // Only regular files are replaced: a FIFO (or device) at the path is an error, kept.
     PtmStreamWriter writer(fifo);
-    stream_map(second, 4, writer);
+    EXPECT_THROW(stream_map(second, 4, writer), Error);
   }
-  EXPECT_TRUE(fs::is_regular_file(fifo));
-  EXPECT_EQ(bytes(fifo), bytes(fresh));
+  EXPECT_TRUE(fs::is_fifo(fifo));
   fs::remove(fresh);
   fs::remove(fifo);
   EXPECT_EQ(test::list_files(dir.path()).size(), 1u);  // out.ptm alone: no temporary left
