@@ -127,11 +127,15 @@ TEST(ReliabilityLimits, LightFileCountsAndEchoedNamesAreBounded) {
   spit(lp2, many);
   expect_error(run_bounded({"fit", lp2.string(), "-o", (dir / "x.ptm").string()}), "many.lp",
                "more than 10000 lights");
-  // A 1 MB name with a bad number, and raw binary bytes: echoed as a short printable excerpt.
+  // A 1 MB number, a 50 MB name and raw binary bytes: quoted as a short printable excerpt.
   const fs::path lp3 = dir / "long.lp";
-  spit(lp3, std::string(1 << 20, 'n') + " 0 0 " + std::string(1 << 20, 'z') + "\n");
+  spit(lp3, "img.png 0 0 " + std::string(1 << 20, 'z') + "\n");
   expect_error(run_bounded({"fit", lp3.string(), "-o", (dir / "x.ptm").string()}), "long.lp",
                "is not a number");
+  const fs::path lp5 = dir / "name.lp";
+  spit(lp5, std::string(50 << 20, 'n') + ".png 0 0 1\n");
+  expect_error(run_bounded({"fit", lp5.string(), "-o", (dir / "x.ptm").string()}), "name.lp",
+               "longer than a path may be");
   const fs::path lp4 = dir / "binary.lp";
   spit(lp4, std::string("\x01\x02\xff\xfe\x7f", 5) + "\n");
   const test::LimitedRun b = run_bounded({"fit", lp4.string(), "-o", (dir / "x.ptm").string()});

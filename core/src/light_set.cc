@@ -106,6 +106,11 @@ LightSet read_lp(const fs::path& path) {
     const std::size_t n = tokens.size();
     std::string name = tokens[0];
     for (std::size_t i = 1; i + 3 < n; ++i) name += " " + tokens[i];
+    if (name.size() > kMaxPathChars) {
+      throw Error(where(path, line_no) + ": image name of " + std::to_string(name.size()) +
+                  " characters, longer than a path may be (" + std::to_string(kMaxPathChars) +
+                  "): '" + excerpt(name) + "'");
+    }
     Eigen::Vector3d v;
     for (int k = 0; k < 3; ++k) {
       if (!parse_double(tokens[n - 3 + k], &v[k])) {

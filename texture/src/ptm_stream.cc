@@ -1,5 +1,6 @@
 // PtmStreamWriter: the fit streams bands in; texels are kept as half floats until end(), which
 // encodes and writes the file in slices of rows.
+#include <cpuid.h>
 #include <fcntl.h>
 #include <immintrin.h>
 #include <sys/mman.h>
@@ -52,7 +53,13 @@ __attribute__((target("avx,f16c"))) void from_half_f16c(const std::uint16_t* in,
   for (; k < n; ++k) out[k] = static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(in[k]));
 }
 
-const bool kHaveF16C = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+// F16C from CPUID leaf 1 (clang's __builtin_cpu_supports does not know "f16c").
+bool have_f16c() {
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  return __builtin_cpu_supports("avx") && __get_cpuid(1, &a, &b, &c, &d) != 0 &&
+         (c & bit_F16C) != 0;
+}
+const bool kHaveF16C = have_f16c();
 
 void to_half(const float* in, std::size_t n, std::uint16_t* out) {
   if (kHaveF16C) return to_half_f16c(in, n, out);

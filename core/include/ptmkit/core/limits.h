@@ -20,6 +20,8 @@ inline constexpr long long kMaxRingLights = 10000;
 inline constexpr long long kMaxBoardTags = 100000;
 // Largest tag id a board may name (ids are ints; a grid's last id is first_id + tags - 1).
 inline constexpr long long kMaxTagId = (1LL << 31) - 1;
+// Characters of a file name read from an input (Linux's PATH_MAX).
+inline constexpr std::size_t kMaxPathChars = 4096;
 // Characters of an input echoed in an error message.
 inline constexpr std::size_t kMaxExcerptChars = 64;
 
