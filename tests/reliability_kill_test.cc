@@ -56,21 +56,23 @@ void kill_and_check(const fs::path& root, const std::vector<std::string>& names,
   seconds_of(before);
   const Contents old_state = outputs(root, names);
   ASSERT_FALSE(old_state.empty());
-  const double full_s = seconds_of(after);
+  double full_s = seconds_of(after);
   const Contents new_state = outputs(root, names);
   ASSERT_FALSE(new_state.empty());
   std::mt19937_64 rng(test::test_seed());
   // Most of a short run is start-up; the draws favour its later part, where outputs are
-  // written and committed, and some land after it ends.
-  std::uniform_real_distribution<double> when(0.3 * full_s, 1.1 * full_s);
+  // written and committed. The run time is re-estimated from every run that ended before its
+  // kill (the machine's load varies), so most runs are killed.
+  std::uniform_real_distribution<double> fraction(0.3, 1.0);
   int killed = 0;
   bool completed = true;  // the outputs are all new: put the old ones back first
   for (int k = 0; k < kKills; ++k) {
     if (completed) seconds_of(before);
-    const double delay = when(rng);
+    const double delay = fraction(rng) * full_s;
     const test::LimitedRun r = test::run_limited(after, {.kill_after_s = delay});
     killed += r.killed ? 1 : 0;
     completed = !r.killed;
+    if (completed) full_s = std::min(full_s, 0.9 * r.elapsed_s);
     const Contents now = outputs(root, names);
     for (const auto& [path, bytes] : now) {
       const auto o = old_state.find(path);

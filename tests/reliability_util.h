@@ -29,6 +29,7 @@ struct Limits {
 struct LimitedRun {
   int exit_code = -1;  // 128 + signal when killed
   bool killed = false;
+  double elapsed_s = 0.0;  // from fork to exit or kill
   std::string out;
   std::string err;
 };
@@ -55,6 +56,7 @@ inline LimitedRun run_limited(const std::vector<std::string>& args, const Limits
   std::vector<char*> argv;
   for (auto& a : store) argv.push_back(a.data());
   argv.push_back(nullptr);
+  const auto start = std::chrono::steady_clock::now();
   const pid_t pid = ::fork();
   if (pid == 0) {
     ::dup2(out_fd, 1);
@@ -86,6 +88,8 @@ inline LimitedRun run_limited(const std::vector<std::string>& args, const Limits
   }
   ::waitpid(pid, &status, 0);
 done:
+  result.elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   if (WIFEXITED(status)) result.killed = false;
   ::close(out_fd);
