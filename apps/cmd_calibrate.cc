@@ -174,7 +174,11 @@ void run_sphere(const SphereArgs& args) {
     double scale = 1.0;
     const Image img = calib::downscale_for_overlay(
         read_image(files.front()), args.overlay_full_size ? 0 : args.overlay_max_side, &scale);
-    write_image(shown, calib::candidates_overlay(img, e.candidates(), scale).view());
+    {
+      // The diagnostic is the point of this failure: it is kept although the command fails.
+      const OutputTransaction::Immediate keep;
+      write_image(shown, calib::candidates_overlay(img, e.candidates(), scale).view());
+    }
     throw Error(std::string(e.what()) + "\nthe candidates are drawn in " + shown.string() +
                 "; no light file written");
   }
