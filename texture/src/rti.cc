@@ -13,6 +13,7 @@
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/limits.h"
+#include "ptmkit/texture/formats.h"
 
 namespace fs = std::filesystem;
 
@@ -83,7 +84,11 @@ RtiWriteReport write_rti(const fs::path& path, const RtiMap& map) {
     scale[k] = hi[k] > lo[k] ? hi[k] - lo[k] : 1e-6f;
   }
   std::ostringstream header;
-  header << "#HSH1.2\n3\n" << map.width << ' ' << map.height << " 3\n" << t << " 2 1\n";
+  // CRLF, as CHI's HSH fitter writes: a widely used Java viewer counts header bytes assuming
+  // two-byte line ends.
+  header << "#HSH1.2\r\n3\r\n"
+         << map.width << ' ' << map.height << " 3\r\n"
+         << t << " 2 1\r\n";
   std::string blob = header.str();
   const std::size_t head = blob.size();
   blob.resize(head + 2 * sizeof(float) * t + map.coeffs.size());
@@ -157,8 +162,7 @@ RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
   } while (!line.empty() && line[0] == '#');
   const long long type = parse_ints(path, line, 1, "the RTI type (3 = HSH)")[0];
   if (type != 3) {
-    throw Error(where(path) + ": RTI type " + std::to_string(type) +
-                " is not supported (only 3, hemispherical harmonics)");
+    throw Error(where(path) + ": " + unsupported_variant("RTI type " + std::to_string(type)));
   }
   if (!next_line(data, &pos, &line)) throw Error(where(path) + ": the header ends early");
   const auto size = parse_ints(path, line, 3, "'width height components'");
