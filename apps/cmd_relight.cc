@@ -165,7 +165,8 @@ void add_relight_command(CLI::App& root) {
       "web folder (the folder or its info.json): one image lit from --light x,y,z, or one image "
       "per light of a .lp "
       "(--lights) compared with that light's photo where it exists (PSNR, mean abs error).");
-  cmd->add_option("input", args->input, "Texture: .ptm, HSH .rti, or a web folder (its folder or info.json)")
+  cmd->add_option("input", args->input,
+                  "Texture: .ptm, HSH .rti, or a web folder (its folder or info.json)")
       ->required();
   auto* light = cmd->add_option(
       "--light", args->light,

@@ -111,8 +111,8 @@ ConvertReport convert_to_ptm(const fs::path& input, const fs::path& output,
                            compression == PtmCompression::kNone
                        ? in.header
                        : std::string();
-      out.trailing = compression == PtmCompression::kNone ? in.trailing
-                                                          : std::vector<std::uint8_t>();
+      out.trailing =
+          compression == PtmCompression::kNone ? in.trailing : std::vector<std::uint8_t>();
       report.bytes_kept = true;
     } else {  // LRGB -> RGB
       PtmWriteReport q;
@@ -120,10 +120,9 @@ ConvertReport convert_to_ptm(const fs::path& input, const fs::path& output,
       report.quantisation = describe(q);
     }
     out.compression = compression;
-    out.compression_parameter =
-        options.jpeg_quality > 0 ? options.jpeg_quality
-        : in.compression == PtmCompression::kJpeg ? in.compression_parameter
-                                                  : 90;
+    out.compression_parameter = options.jpeg_quality > 0                  ? options.jpeg_quality
+                                : in.compression == PtmCompression::kJpeg ? in.compression_parameter
+                                                                          : 90;
   } else {
     const LoadedTexture tex = read_texture(input);
     report.from = tex.format;

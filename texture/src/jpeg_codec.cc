@@ -86,8 +86,7 @@ bool decode_into(jpeg_decompress_struct* cinfo, ErrorManager* err, const std::ui
 }
 
 bool encode_into(jpeg_compress_struct* cinfo, ErrorManager* err, const std::uint8_t* pixels,
-                 int width, int height, int quality, unsigned char** buffer,
-                 unsigned long* size) {
+                 int width, int height, int quality, unsigned char** buffer, unsigned long* size) {
   if (setjmp(err->jump) != 0) return false;
   jpeg_create_compress(cinfo);
   jpeg_mem_dest(cinfo, buffer, size);

@@ -379,8 +379,7 @@ Header parse_header(const std::uint8_t* data, std::size_t size, const fs::path& 
         const std::string_view t = tokens.next(label.c_str());
         unsigned long long v = 0;
         if (!parse_number(t, &v) || v > (1ULL << 40)) {
-          throw Error(tokens.at() + ": " + label + " '" + printable(t) +
-                      "' is not a byte count");
+          throw Error(tokens.at() + ": " + label + " '" + printable(t) + "' is not a byte count");
         }
         (*out)[static_cast<std::size_t>(k)] = static_cast<std::size_t>(v);
       }
@@ -470,9 +469,8 @@ PtmFile read_ptm_file(const fs::path& path) {
   const std::size_t present = bytes.size() - h.header_bytes;
   if (present < expected) {
     throw Error(where(path) + ": binary data truncated: " + std::to_string(h.width) + " x " +
-                std::to_string(h.height) + " " +
-                std::string(format_name(h.format, h.compression)) + " needs " +
-                std::to_string(expected) + " bytes after the header, found " +
+                std::to_string(h.height) + " " + std::string(format_name(h.format, h.compression)) +
+                " needs " + std::to_string(expected) + " bytes after the header, found " +
                 std::to_string(present));
   }
   if (present > expected) {
@@ -496,8 +494,8 @@ PtmFile read_ptm_file(const fs::path& path) {
   f.trailing.assign(data_end, bytes.end());
   if (h.compression == PtmCompression::kJpeg) {
     // The header describes streams that are not kept: a rewrite writes its own.
-    f.data = internal::decode_jpeg_planes(bytes.data() + h.header_bytes, expected, h.jpeg,
-                                          h.format, h.width, h.height, path);
+    f.data = internal::decode_jpeg_planes(bytes.data() + h.header_bytes, expected, h.jpeg, h.format,
+                                          h.width, h.height, path);
     return f;
   }
   f.header.assign(bytes.begin(), data_begin);
@@ -550,8 +548,7 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
       const Header h = parse_header(raw, file.header.size(), path);
       if (h.header_bytes == file.header.size() && h.version == file.version &&
           h.format == file.format && h.compression == PtmCompression::kNone &&
-          h.width == file.width && h.height == file.height &&
-          h.quantisation == file.quantisation) {
+          h.width == file.width && h.height == file.height && h.quantisation == file.quantisation) {
         header = file.header;
       }
     } catch (const Error&) {

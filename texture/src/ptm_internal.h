@@ -10,8 +10,8 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
-#include <string>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "ptmkit/core/light_layout.h"

@@ -142,9 +142,9 @@ void encode_jpeg_planes(const PtmFile& file, int quality, std::string* header_ta
     }
   };
   *header_tail = std::to_string(quality) + '\n';
-  line([](int) { return 0; });  // transforms
-  line([](int) { return 0; });  // motion vectors x
-  line([](int) { return 0; });  // motion vectors y
+  line([](int) { return 0; });    // transforms
+  line([](int) { return 0; });    // motion vectors x
+  line([](int) { return 0; });    // motion vectors y
   line([](int k) { return k; });  // decode order
   line([](int) { return -1; });   // reference planes
   line([&](int k) { return sizes[static_cast<std::size_t>(k)]; });

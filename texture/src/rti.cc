@@ -86,9 +86,7 @@ RtiWriteReport write_rti(const fs::path& path, const RtiMap& map) {
   std::ostringstream header;
   // CRLF, as CHI's HSH fitter writes: a widely used Java viewer counts header bytes assuming
   // two-byte line ends.
-  header << "#HSH1.2\r\n3\r\n"
-         << map.width << ' ' << map.height << " 3\r\n"
-         << t << " 2 1\r\n";
+  header << "#HSH1.2\r\n3\r\n" << map.width << ' ' << map.height << " 3\r\n" << t << " 2 1\r\n";
   std::string blob = header.str();
   const std::size_t head = blob.size();
   blob.resize(head + 2 * sizeof(float) * t + map.coeffs.size());

@@ -211,8 +211,7 @@ WebFolderInfo read_web_info(const fs::path& path) {
     const auto& l = j["lights"];
     for (std::size_t i = 0; i + 2 < l.size(); i += 3) {
       if (!l[i].is_number() || !l[i + 1].is_number() || !l[i + 2].is_number()) break;
-      info.lights.emplace_back(l[i].get<double>(), l[i + 1].get<double>(),
-                               l[i + 2].get<double>());
+      info.lights.emplace_back(l[i].get<double>(), l[i + 1].get<double>(), l[i + 2].get<double>());
     }
   }
   if (!j.contains("materials") || !j["materials"].is_array() || j["materials"].empty() ||
@@ -252,8 +251,9 @@ WebFolderInfo read_web_info(const fs::path& path) {
     if (!xml_int(xml, "Image", "TileSize", &info.tile_size) || info.tile_size <= 0 ||
         !xml_int(xml, "Image", "Overlap", &info.overlap) || !xml_int(xml, "Size", "Width", &w) ||
         !xml_int(xml, "Size", "Height", &h)) {
-      throw Error(where(dzi) + ": not a deep-zoom descriptor (TileSize, Overlap, Size Width and "
-                               "Height expected)");
+      throw Error(where(dzi) +
+                  ": not a deep-zoom descriptor (TileSize, Overlap, Size Width and "
+                  "Height expected)");
     }
     if (w != info.width || h != info.height) {
       throw Error(where(dzi) + ": " + std::to_string(w) + " x " + std::to_string(h) +
@@ -262,8 +262,8 @@ WebFolderInfo read_web_info(const fs::path& path) {
     }
     const std::string tile_format = xml_string(xml, "Image", "Format");
     if (tile_format != "jpg" && tile_format != "jpeg") {
-      throw Error(where(dzi) + ": " + unsupported_variant("deep-zoom tile format '" +
-                                                          tile_format + "'"));
+      throw Error(where(dzi) + ": " +
+                  unsupported_variant("deep-zoom tile format '" + tile_format + "'"));
     }
   } else {
     for (const char* other : {".tzi", ".tzb"}) {
@@ -286,7 +286,8 @@ WebTexture read_web_folder(const fs::path& path, ColourSpace colour_space) {
   for (int j = 0; j < info.jpegs(); ++j) jpegs[j] = read_plane_image(info, j);
   // Coefficient of plane k at texel i.
   auto coef = [&](int k, std::size_t i) {
-    const double b = jpegs[static_cast<std::size_t>(k / 3)][i * 3 + static_cast<std::size_t>(k % 3)];
+    const double b =
+        jpegs[static_cast<std::size_t>(k / 3)][i * 3 + static_cast<std::size_t>(k % 3)];
     return (b / 255.0 - info.bias[static_cast<std::size_t>(k)]) *
            info.scale[static_cast<std::size_t>(k)];
   };

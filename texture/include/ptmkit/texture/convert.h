@@ -38,8 +38,8 @@ struct ConvertOptions {
 
 struct ConvertReport {
   std::filesystem::path input, output;
-  std::string from, to;     // format names, e.g. "PTM_FORMAT_JPEG_LRGB" -> "PTM_FORMAT_LRGB"
-  bool bytes_kept = false;  // the source's coefficient bytes, scales and biases were kept
+  std::string from, to;      // format names, e.g. "PTM_FORMAT_JPEG_LRGB" -> "PTM_FORMAT_LRGB"
+  bool bytes_kept = false;   // the source's coefficient bytes, scales and biases were kept
   std::string quantisation;  // what re-quantising cost, when it happened
   std::size_t file_bytes = 0;
 };
