@@ -45,6 +45,10 @@ void add_export_convert_commands(CLI::App& export_cmd) {
                     "JPEG quality 1..100 of jpeg-* targets (default: the source's own if it is "
                     "a JPEG .ptm, else 90)")
         ->check(CLI::Range(1, 100));
+    cmd->add_flag("--integer-scales", args->options.write.integer_scales,
+                  "Re-quantise with whole-number scales, so that readers which truncate "
+                  "(byte - bias) * scale to an integer (RTIViewer) lose nothing to it; costs "
+                  "precision in exact readers (docs/FORMATS.md)");
     cmd->callback(
         [args] { print(texture::convert_to_ptm(args->input, args->output, args->options)); });
   }

@@ -105,7 +105,13 @@ ConvertReport convert_to_ptm(const fs::path& input, const fs::path& output,
              "one luminance polynomial times a colour cannot hold three independent RGB "
              "polynomials");
     }
-    if (format == in.format) {
+    if (format == in.format && options.write.integer_scales) {
+      // Re-quantised with whole-number scales (for truncating readers).
+      const CoefficientMap m = decode_ptm(in);
+      PtmWriteReport q;
+      out = encode_ptm(m, options.write, &q);
+      report.quantisation = describe(q);
+    } else if (format == in.format) {
       out = as_1_2(in);
       out.header = in.version == PtmVersion::k1_2 && in.compression == compression &&
                            compression == PtmCompression::kNone

@@ -45,7 +45,7 @@ int PtmInfo::bytes_per_texel() const { return internal::bytes_per_texel(format);
 // Quantisation
 
 PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
-                                    const std::array<double, kPtmTerms>& hi) {
+                                    const std::array<double, kPtmTerms>& hi, bool integer_scales) {
   PtmQuantisation q;
   for (int i = 0; i < kPtmTerms; ++i) {
     const double l = std::min(lo[i], 0.0);
@@ -53,6 +53,19 @@ PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
     if (!(h - l > 0.0)) {
       q.scales[i] = 1.0f;
       q.biases[i] = 0;
+      continue;
+    }
+    if (integer_scales) {
+      // The smallest whole scale s with an integer bias b reaching both ends:
+      // b >= -l / s and 255 - b >= h / s.
+      for (double s = std::max(1.0, std::ceil((h - l) / 255.0));; s += 1.0) {
+        const double b = std::ceil(-l / s - 1e-9);
+        if (b + std::ceil(h / s - 1e-9) <= 255.0) {
+          q.scales[i] = static_cast<float>(s);
+          q.biases[i] = static_cast<int>(b);
+          break;
+        }
+      }
       continue;
     }
     const double ideal = -l / (h - l) * 255.0;
@@ -621,7 +634,7 @@ PtmFile encode_ptm(const CoefficientMap& map, const PtmWriteOptions& options,
     lo[i] *= 255.0;
     hi[i] *= 255.0;
   }
-  const PtmQuantisation q = choose_quantisation(lo, hi);
+  const PtmQuantisation q = choose_quantisation(lo, hi, options.integer_scales);
   return internal::encode(source, map.width, map.height, format, q, options, report);
 }
 

@@ -587,7 +587,7 @@ void PtmStreamWriter::end() {
   meta.format = s.format;
   meta.width = s.width;
   meta.height = s.height;
-  meta.quantisation = choose_quantisation(lo, hi);
+  meta.quantisation = choose_quantisation(lo, hi, options_.integer_scales);
   const PtmQuantisation& q = meta.quantisation;
   const std::string header = meta.canonical_header();
   const int np = internal::planes(s.format);

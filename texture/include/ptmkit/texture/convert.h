@@ -32,7 +32,8 @@ struct ConvertOptions {
   // JPEG quality (1..100) of JPEG .ptm targets; 0: the source's own when it is a JPEG .ptm,
   // else 90.
   int jpeg_quality = 0;
-  // Options of any re-quantisation (its error report).
+  // Options of any re-quantisation (its error report; integer_scales re-quantises even a
+  // same-format .ptm, with whole-number scales for readers that truncate, docs/FORMATS.md).
   PtmWriteOptions write;
 };
 

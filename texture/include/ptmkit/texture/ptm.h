@@ -86,8 +86,13 @@ struct PtmQuantisation {
 
 // Quantisation for file coefficients (0..255 units) spanning [lo[i], hi[i]] per index i, by
 // the rule above. Non-finite bounds are a programmer error.
+// With `integer_scales`, every scale is a whole number (the smallest that, with an integer
+// bias, reaches both ends): (byte - bias) * scale is then an integer, so a reader that
+// truncates it to an integer (RTIViewer does) loses nothing; the price is a coarser step for
+// coefficients whose range is under 255 units (docs/FORMATS.md has the measured trade).
 [[nodiscard]] PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
-                                                  const std::array<double, kPtmTerms>& hi);
+                                                  const std::array<double, kPtmTerms>& hi,
+                                                  bool integer_scales = false);
 
 // Header fields of a file.
 struct PtmInfo {
@@ -187,6 +192,10 @@ struct PtmWriteOptions {
   // process's own footprint stays bounded. Spilling only the excess rather than everything
   // saved 0.4 s of a 2.4 s fit (docs/PERFORMANCE.md). 0: always in memory.
   std::size_t spill_above_bytes = std::size_t{192} << 20;
+  // Whole-number scales (see choose_quantisation), for readers that truncate
+  // (byte - bias) * scale to an integer. Off: the finest scales (the bytes fit has always
+  // written).
+  bool integer_scales = false;
 };
 
 // What quantisation cost.
