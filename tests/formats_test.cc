@@ -351,6 +351,28 @@ TEST(Refusals, EveryUnsupportedVariantSaysWhatIsSupported) {
   }
 }
 
+TEST(PtmScales, IntegerScalesAreWholeAndReachBothEnds) {
+  std::mt19937_64 rng(test::test_seed());
+  for (int trial = 0; trial < 200; ++trial) {
+    std::array<double, kPtmTerms> lo{}, hi{};
+    for (int i = 0; i < kPtmTerms; ++i) {
+      lo[i] = -static_cast<double>(rng() % 40000) / 100.0;
+      hi[i] = static_cast<double>(rng() % 40000) / 100.0;
+    }
+    const PtmQuantisation q = choose_quantisation(lo, hi, true);
+    const PtmQuantisation fine = choose_quantisation(lo, hi);
+    for (int i = 0; i < kPtmTerms; ++i) {
+      const double s = q.scales[i];
+      EXPECT_EQ(s, std::floor(s));
+      EXPECT_GE(s, 1.0);
+      EXPECT_LE(-q.biases[i] * s, lo[i] + 1e-9);         // byte 0 reaches lo
+      EXPECT_GE((255 - q.biases[i]) * s, hi[i] - 1e-9);  // byte 255 reaches hi
+      // At most one whole step above the finest scale rounded up (the two ends' ceilings).
+      EXPECT_LE(s, std::ceil(std::max(1.0, static_cast<double>(fine.scales[i]))) + 1.0);
+    }
+  }
+}
+
 // ------------------------------------------------------------------------------------------
 // .rti line ends
 
