@@ -700,6 +700,21 @@ TEST(Convert, CommandLine) {
   r = test::run_ptmkit({"info", (dir / "out.ptm").string()});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("PTM_FORMAT_JPEG_LRGB"), std::string::npos) << r.out;
+  // A web folder, given as the folder and as its info.json, in info and relight.
+  std::vector<double> scale(18, 1.0), bias(18, 0.0);
+  write_web_folder(dir / "web", "ptm", "rgb", smooth_planes(6, 12, 8, 5), scale, bias, true);
+  r = test::run_ptmkit({"info", (dir / "web").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("web folder, type ptm, colour space rgb, layout deepzoom"),
+            std::string::npos)
+      << r.out;
+  r = test::run_ptmkit({"relight", (dir / "web" / "info.json").string(), "--light", "0.2,0.1,1",
+                        "-o", (dir / "web.png").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_image(dir / "web.png").width(), 12);
+  r = test::run_ptmkit({"export", "ptm", (dir / "web").string(), "-o", (dir / "web.ptm").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_ptm_file(dir / "web.ptm").format, PtmFormat::kRGB);
 }
 
 // ------------------------------------------------------------------------------------------
