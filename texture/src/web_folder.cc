@@ -108,8 +108,7 @@ std::vector<std::uint8_t> read_plane_image(const WebFolderInfo& info, int j) {
     const int left = tx > 0 ? ov : 0, top_ov = ty > 0 ? ov : 0;
     const int tw = cw + left + (tx + 1 < cols ? std::min(ov, info.width - x0 - cw) : 0);
     const int th = ch + top_ov + (ty + 1 < rows ? std::min(ov, info.height - y0 - ch) : 0);
-    const fs::path tile =
-        level / (std::to_string(tx) + "_" + std::to_string(ty) + "." + std::string("jpg"));
+    const fs::path tile = level / (std::to_string(tx) + "_" + std::to_string(ty) + ".jpg");
     const std::vector<std::uint8_t> px = decode_file(tile, tw, th);
     for (int y = 0; y < ch; ++y) {
       std::copy_n(px.data() + (static_cast<std::size_t>(y + top_ov) * tw + left) * 3,
@@ -239,7 +238,6 @@ WebFolderInfo read_web_info(const fs::path& path) {
   values("scale", &info.scale);
   values("bias", &info.bias);
   // Layout, from the files present.
-  const fs::path first = info.folder / plane_name(0);
   if (fs::is_regular_file(info.folder / (plane_name(0) + ".jpg"), ec)) {
     info.layout = "image";
   } else if (fs::is_regular_file(info.folder / (plane_name(0) + ".dzi"), ec)) {
