@@ -430,7 +430,9 @@ std::size_t data_bytes(PtmFormat format, int width, int height) {
 std::vector<std::uint8_t> read_bytes(const fs::path& path, std::size_t limit) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(where(path) + ": no such file");
-  if (fs::is_directory(path, ec)) throw Error(where(path) + ": is a folder, expected a .ptm file");
+  if (fs::is_directory(path, ec))
+    throw Error(where(path) +
+                ": is a folder without an info.json (not a web folder), expected a .ptm file");
   // Regular files only (a device never ends), read only if they fit in memory.
   const std::uintmax_t size =
       checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".ptm file");
