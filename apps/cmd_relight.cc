@@ -104,11 +104,11 @@ void run_relight(const RelightArgs& args) {
     }
     if (is_rti(args.input)) {
       if (args.integer) throw Error(args.input + ": --integer needs a .ptm (it is an .rti)");
-      const texture::RtiMap rti = texture::read_rti(args.input, space);
+      const CoefficientMap rti = texture::read_rti(args.input, space);
       const Image image = texture::relight(rti, dir, relight_options);
       write_image(args.output, image.view(), write);
       std::printf("relit %s (%d x %d, HSH %d terms) from (%.4f, %.4f, %.4f): wrote %s\n",
-                  args.input.c_str(), rti.width, rti.height, rti.terms, dir.x(), dir.y(), dir.z(),
+                  args.input.c_str(), rti.width, rti.height, rti.terms(), dir.x(), dir.y(), dir.z(),
                   args.output.c_str());
       return;
     }

@@ -57,6 +57,19 @@ void AtomicOutput::commit() {
   committed_ = true;
 }
 
+const fs::path& OutputSet::add(const fs::path& target) {
+  outputs_.push_back(std::make_unique<AtomicOutput>(target));
+  return outputs_.back()->temp_path();
+}
+
+void OutputSet::commit() {
+  for (const auto& o : outputs_) {
+    std::error_code ec;
+    if (!fs::exists(o->temp_path(), ec)) throw Error(where(o->target()) + ": nothing was written");
+  }
+  for (const auto& o : outputs_) o->commit();
+}
+
 void write_file_atomic(const fs::path& path, std::string_view contents) {
   AtomicOutput out(path);
   {

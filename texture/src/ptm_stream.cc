@@ -432,8 +432,15 @@ std::size_t PtmStreamWriter::buffer_bytes() const {
 
 bool PtmStreamWriter::spilled() const { return impl_->spill.fd >= 0; }
 
-void PtmStreamWriter::begin(int width, int height, ColourModel model, ColourSpace colour_space) {
-  (void)colour_space;  // the .ptm format does not record it
+void PtmStreamWriter::begin(const CoefficientLayout& layout) {
+  // The .ptm format does not record the colour space.
+  const int width = layout.width;
+  const int height = layout.height;
+  const ColourModel model = layout.model;
+  if (layout.basis != Basis::kPtm) {
+    throw Error(where(path_) + ": a .ptm holds the ptm basis, not " +
+                std::string(to_string(layout.basis)) + " (write an .rti)");
+  }
   if (width <= 0 || height <= 0 || width > kMaxPtmSide || height > kMaxPtmSide) {
     throw Error(where(path_) + ": cannot write a " + std::to_string(width) + " x " +
                 std::to_string(height) + " PTM");
@@ -478,7 +485,7 @@ void PtmStreamWriter::begin(int width, int height, ColourModel model, ColourSpac
   }
   s.lo.fill(std::numeric_limits<float>::infinity());
   s.hi.fill(-std::numeric_limits<float>::infinity());
-  drop_cached(path_);
+  drop_cached(options_.replaces.empty() ? path_ : options_.replaces);
   s.begun = true;
 }
 

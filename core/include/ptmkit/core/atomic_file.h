@@ -4,7 +4,9 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <string_view>
+#include <vector>
 
 namespace ptmkit {
 
@@ -26,6 +28,23 @@ class AtomicOutput {
   std::filesystem::path target_;
   std::filesystem::path temp_;
   bool committed_ = false;
+};
+
+// The outputs of one command, committed together: each is written to its own temporary path
+// beside its target (add), and commit() moves them all into place once every one is written,
+// so a command that fails before commit() leaves none of them (a failure among the renames
+// themselves, e.g. a target folder removed meanwhile, can leave the ones renamed before it).
+// Temporary files not committed are removed on destruction.
+class OutputSet {
+ public:
+  // The path to write `target` to (its folder must exist). Throws as AtomicOutput does.
+  const std::filesystem::path& add(const std::filesystem::path& target);
+  // Checks that every output was written (ptmkit::Error naming the first that was not), then
+  // renames each onto its target, in the order added.
+  void commit();
+
+ private:
+  std::vector<std::unique_ptr<AtomicOutput>> outputs_;
 };
 
 // Writes a text or binary blob atomically.

@@ -149,6 +149,10 @@ struct PtmWriteOptions {
   // process's own footprint stays bounded. Spilling only the excess rather than everything
   // saved 0.4 s of a 2.4 s fit (docs/PERFORMANCE.md). 0: always in memory.
   std::size_t spill_above_bytes = std::size_t{192} << 20;
+  // PtmStreamWriter writing to a staging path (core's OutputSet, committed later): the file
+  // the output will replace, whose cached pages are then dropped as the output path's would
+  // be (see PtmStreamWriter::begin). Empty: the output path itself.
+  std::filesystem::path replaces;
 };
 
 // What quantisation cost.
@@ -221,7 +225,8 @@ class PtmStreamWriter final : public CoefficientSink {
   PtmStreamWriter(const PtmStreamWriter&) = delete;
   PtmStreamWriter& operator=(const PtmStreamWriter&) = delete;
 
-  void begin(int width, int height, ColourModel model, ColourSpace colour_space) override;
+  // Throws ptmkit::Error for a basis other than PTM or a size the format cannot hold.
+  void begin(const CoefficientLayout& layout) override;
   // Bands must arrive top to bottom, consecutive; anything else throws std::logic_error.
   void write_rows(int y0, int rows, const float* coeffs, const float* colour) override;
   // Throws std::logic_error if rows are missing, ptmkit::Error if the write fails.
