@@ -9,6 +9,7 @@
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/fit/basis.h"
+#include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/model_select.h"
 #include "ptmkit/texture/rti.h"
 #include "test_util.h"
@@ -135,7 +136,7 @@ TEST(ModelSelect, CliWritesTheMatchingFormat) {
   const test::RunResult hsh =
       test::run_ptmkit({"fit", lp, "--model", "hsh3", "-o", (dir / "h.rti").string()});
   EXPECT_EQ(hsh.exit_code, 0) << hsh.err;
-  EXPECT_EQ(texture::read_rti(dir / "h.rti").terms, 9);
+  EXPECT_EQ(texture::read_rti(dir / "h.rti").terms(), 9);
   const test::RunResult wrong =
       test::run_ptmkit({"fit", lp, "--model", "hsh3", "-o", (dir / "h.ptm").string()});
   EXPECT_EQ(wrong.exit_code, 1);

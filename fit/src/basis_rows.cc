@@ -20,16 +20,15 @@ void BasisRowFitter::fit_row(const StackBand& band, int r, float* c_out, float* 
       for (int k = 0; k < 3; ++k) rgb(i, k) = band.sample(i, r, x, ch == 3 ? k : 0);
     }
     if (lum) {
-      double yy = 0.0, yc[3] = {0, 0, 0};
+      LrgbSums sums;
       for (int i = 0; i < n; ++i) {
         v(i) = ch == 3 ? luma(rgb(i, 0), rgb(i, 1), rgb(i, 2)) : rgb(i, 0);
-        yy += v(i) * v(i);
-        for (int k = 0; k < 3; ++k) yc[k] += v(i) * rgb(i, k);
+        sums.add(1.0, v(i), rgb(i, 0), rgb(i, 1), rgb(i, 2));
       }
       c.noalias() = design_.pseudo_inverse * v;
       // The least-squares colour of the LRGB model, multiplied out; grey input gives (1, 1, 1).
       for (int k = 0; k < 3; ++k) {
-        const double kc = yy > 1e-20 ? std::max(0.0, yc[k] / yy) : 1.0;
+        const double kc = sums.factor(k);
         for (int j = 0; j < t; ++j) dst[k * t + j] = static_cast<float>(kc * c(j));
       }
     } else {

@@ -45,16 +45,12 @@ void PtmRowFitter::texel_colour(const std::vector<double>& s, int n, const doubl
                                 const double* weights, float* coef, float* col) const {
   const int ch = channels_;
   if (options_.model == ColourModel::kLRGB) {
-    double yy = 0.0;
-    double yc[3] = {0.0, 0.0, 0.0};
+    LrgbSums sums;
     for (int i = 0; i < n; ++i) {
-      const double w = weights[i];
-      const double yi = value[i];
-      yy += w * yi * yi;
-      for (int k = 0; k < 3; ++k)
-        yc[k] += w * yi * s[static_cast<std::size_t>(i * ch + (ch == 3 ? k : 0))];
+      const double* p = s.data() + static_cast<std::size_t>(i) * ch;
+      sums.add(weights[i], value[i], p[0], p[ch == 3 ? 1 : 0], p[ch == 3 ? 2 : 0]);
     }
-    internal::finish_lrgb_colour(yy, yc, col, coef);
+    internal::finish_lrgb_colour(sums.yy, sums.yc, col, coef);
     return;
   }
   double sy = 0.0, scb = 0.0, scr = 0.0;
