@@ -8,6 +8,7 @@
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/calib/sphere_refine.h"
+#include "ptmkit/calib/sphere_stack.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
@@ -60,8 +61,41 @@ struct SphereArgs {
   std::string overlays;
   std::string plot;
   std::vector<int> drop;
+  std::vector<std::string> rois;
+  std::string radius_range;
+  std::string reference;
+  double min_score = 0.5;
+  bool overlay_full_size = false;
+  int overlay_max_side = 1600;
   calib::SphereOptions options;
 };
+
+calib::PixelBox parse_box(const std::string& text) {
+  int v[4];
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%d,%d,%d,%d%c", &v[0], &v[1], &v[2], &v[3], &tail) != 4) {
+    throw Error("--roi " + text + ": expected x,y,w,h in pixels");
+  }
+  if (v[2] <= 0 || v[3] <= 0) throw Error("--roi " + text + ": width and height must be > 0");
+  return {v[0], v[1], v[2], v[3]};
+}
+
+// Overlays one image at a time (never the whole stack), downscaled unless asked otherwise.
+void write_overlays(const SphereArgs& args, const std::vector<std::filesystem::path>& files,
+                    const calib::RigReport& report) {
+  ensure_directory(args.overlays);
+  const int max_side = args.overlay_full_size ? 0 : args.overlay_max_side;
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    double scale = 1.0;
+    Image overlay = calib::downscale_for_overlay(read_image(files[i]), max_side, &scale);
+    int row = 0;
+    for (const calib::SphereReport& s : report.spheres) {
+      overlay = calib::sphere_overlay(overlay, s, i, scale, row++);
+    }
+    const auto name = files[i].stem().string() + ".overlay.png";
+    write_image(std::filesystem::path(args.overlays) / name, overlay.view());
+  }
+}
 
 void run_sphere(const SphereArgs& args) {
   calib::RigOptions options;
@@ -91,14 +125,13 @@ void run_sphere(const SphereArgs& args) {
   }
   if (!args.plane.empty()) options.plane = read_plane_json(args.plane);
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
-  const std::vector<Image> images = read_stack(files);
+  const ImageInfo first = probe_image(files.front());
   const int given = (args.camera.empty() ? 0 : 1) + (args.focal_mm > 0.0 ? 1 : 0) +
                     (options.detection.camera.focal_px > 0.0 ? 1 : 0);
   if (given > 1) throw Error("give the focal length once: --camera, --focal-mm or --focal-px");
   if (!args.camera.empty()) {
-    const calib::SphereCamera cam =
-        calib::sphere_camera(calib::read_camera_json(args.camera), images.front().width(),
-                             images.front().height(), args.camera);
+    const calib::SphereCamera cam = calib::sphere_camera(calib::read_camera_json(args.camera),
+                                                         first.width, first.height, args.camera);
     options.detection.camera.focal_px = cam.focal_px;
     if (args.principal.empty()) options.detection.camera.principal_px = cam.principal_px;
   }
@@ -107,9 +140,49 @@ void run_sphere(const SphereArgs& args) {
       throw Error("--focal-mm needs --sensor-width-mm (the sensor's width in mm)");
     }
     options.detection.camera.focal_px =
-        calib::focal_px_from_lens(args.focal_mm, args.sensor_width_mm, images.front().width());
+        calib::focal_px_from_lens(args.focal_mm, args.sensor_width_mm, first.width);
   }
-  calib::RigReport report = calib::calibrate_rig(images, files, options);
+  calib::StackCalibrationOptions stack_options;
+  stack_options.rig = options;
+  for (const std::string& r : args.rois) stack_options.search.rois.push_back(parse_box(r));
+  if (!args.radius_range.empty()) {
+    double lo = 0.0, hi = 0.0;
+    char tail = 0;
+    if (std::sscanf(args.radius_range.c_str(), "%lf,%lf%c", &lo, &hi, &tail) != 2 ||
+        !(lo >= 0.0 && hi >= lo && hi > 0.0)) {
+      throw Error("--radius-range " + args.radius_range +
+                  ": expected MIN,MAX in pixels with 0 <= MIN <= MAX");
+    }
+    stack_options.search.min_radius_px = lo;
+    stack_options.search.max_radius_px = hi;
+  }
+  if (!args.reference.empty()) stack_options.search.reference = args.reference;
+  stack_options.search.min_score = args.min_score;
+  if (!options.spheres.empty() && (!args.rois.empty() || !args.radius_range.empty())) {
+    throw Error("--roi and --radius-range help the search: not with --sphere or --mask");
+  }
+  calib::StackCalibration result;
+  try {
+    result = calib::calibrate_sphere_stack(files, stack_options);
+  } catch (const calib::SphereSearchError& e) {
+    // What was considered, drawn on the first photo, so the user can see it and give a hint.
+    const std::filesystem::path shown =
+        args.overlays.empty()
+            ? std::filesystem::path(args.output).replace_extension(".candidates.png")
+            : std::filesystem::path(args.overlays) / "candidates.png";
+    if (!args.overlays.empty()) ensure_directory(args.overlays);
+    double scale = 1.0;
+    const Image img = calib::downscale_for_overlay(
+        read_image(files.front()), args.overlay_full_size ? 0 : args.overlay_max_side, &scale);
+    {
+      // The diagnostic is the point of this failure: it is kept although the command fails.
+      const OutputTransaction::Immediate keep;
+      write_image(shown, calib::candidates_overlay(img, e.candidates(), scale).view());
+    }
+    throw Error(std::string(e.what()) + "\nthe candidates are drawn in " + shown.string() +
+                "; no light file written");
+  }
+  calib::RigReport& report = result.rig;
   calib::drop_rig_lights(args.drop, &report);
   const int dropped = args.drop_outliers ? calib::drop_outliers(&report) : 0;
   const LightSet lights = calib::rig_light_set(report);
@@ -118,18 +191,8 @@ void run_sphere(const SphereArgs& args) {
   }
   write_lp(args.output, lights);
   if (!args.json.empty()) calib::write_light_set_json(args.json, lights);
-  if (!args.report.empty()) write_file_atomic(args.report, report.to_json() + "\n");
-  if (!args.overlays.empty()) {
-    ensure_directory(args.overlays);
-    for (std::size_t i = 0; i < images.size(); ++i) {
-      Image overlay = images[i];
-      for (const calib::SphereReport& s : report.spheres) {
-        overlay = calib::sphere_overlay(overlay, s, i);
-      }
-      const auto name = files[i].stem().string() + ".overlay.png";
-      write_image(std::filesystem::path(args.overlays) / name, overlay.view());
-    }
-  }
+  if (!args.report.empty()) write_file_atomic(args.report, result.to_json() + "\n");
+  if (!args.overlays.empty()) write_overlays(args, files, report);
   if (!args.plot.empty()) {
     // The plot shows the rig's lights: the first sphere's report with the rig's results.
     calib::SphereReport shown = report.spheres.front();
@@ -141,9 +204,23 @@ void run_sphere(const SphereArgs& args) {
     write_image(args.plot, calib::light_polar_plot(shown).view());
   }
   for (const calib::SphereReport& s : report.spheres) {
-    std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s)\n",
+    double score = 0.0;
+    for (const auto& c : result.candidates) {
+      if (c.chosen && (c.circle.centre_px - s.sphere.centre_px).norm() < 0.1 * s.sphere.radius_px) {
+        score = c.score;
+      }
+    }
+    std::printf("calibrate sphere: sphere at (%.2f, %.2f) radius %.2f px (%s",
                 s.sphere.centre_px.x(), s.sphere.centre_px.y(), s.sphere.radius_px,
                 s.sphere_detected ? "found" : "given");
+    if (s.sphere_detected) std::printf(", score %.2f", score);
+    std::printf(")\n");
+  }
+  if (result.two_spot_images * 2 > static_cast<int>(files.size())) {
+    std::printf(
+        "  %d images show two moving spots on a sphere (glass?): the brightest was taken; check "
+        "the overlays\n",
+        result.two_spot_images);
   }
   std::printf("calibrate sphere: %s model%s; %d of %zu lights usable, %d outliers%s -> %s%s%s\n",
               report.model.c_str(), report.refined ? ", refined" : "", report.usable(),
@@ -263,6 +340,28 @@ void add_calibrate_command(CLI::App& root) {
                  "Folder for one overlay PNG per image: the sphere and the highlight found "
                  "(green used, orange outlier, red flagged)");
   sp->add_option("--plot", sphere->plot, "Polar plot (PNG) of the light directions");
+  sp->add_option("--roi", sphere->rois,
+                 "Search box x,y,w,h in pixels for a sphere (repeat once per sphere): a sphere "
+                 "is taken in each box")
+      ->expected(1)
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  sp->add_option("--radius-range", sphere->radius_range,
+                 "Search only spheres of radius MIN,MAX pixels");
+  sp->add_option("--reference", sphere->reference,
+                 "A photo of the scene in room light (same size): its sphere rims help the "
+                 "search");
+  sp->add_option("--min-score", sphere->min_score,
+                 "A found sphere needs at least this evidence score (0..1; see the report's "
+                 "candidates)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  sp->add_flag("--overlay-full-size", sphere->overlay_full_size,
+               "Overlays at the photographs' size (default: longest side --overlay-max-side)");
+  sp->add_option("--overlay-max-side", sphere->overlay_max_side,
+                 "Downscaled overlays' longest side, pixels")
+      ->capture_default_str()
+      ->check(CLI::Range(64, 100000));
   sp->callback([sphere] { run_sphere(*sphere); });
   add_calibrate_board_commands(cmd);
 }

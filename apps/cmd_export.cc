@@ -94,7 +94,8 @@ void add_export_command(CLI::App& root) {
   CLI::App* cmd = root.add_subcommand(
       "export",
       "Convert a texture to another format: `export web` writes the relight/OpenLIME "
-      "web folder with a viewer");
+      "web folder with a viewer; `export ptm` and `export rti` convert between .ptm, .rti "
+      "and web folders");
   cmd->require_subcommand(1);
 
   auto args = std::make_shared<ExportWebArgs>();
@@ -114,8 +115,8 @@ void add_export_command(CLI::App& root) {
                 "Leave out index.html, viewer.js and viewer.css (data only)");
   web->callback([args] { run_export_web(*args); });
 
-  // The other conversions (export ptm, export rti) register here:
-  // add_export_convert_commands(*cmd);
+  // The other conversions (export ptm, export rti).
+  add_export_convert_commands(*cmd);
 }
 
 }  // namespace ptmkit::app

@@ -50,8 +50,7 @@ void check_map_path(const std::string& path, const char* flag, bool png_ok) {
   throw Error(path + ": " + flag + " must be an .exr file" + (png_ok ? " or a .png file" : ""));
 }
 
-// The coefficient file's writer for the planned format, writing to `path` (a staging path
-// of the run's OutputSet); `replaces` is the file it will replace.
+// The coefficient file's writer for the planned format.
 struct CoefficientWriter {
   std::unique_ptr<texture::PtmStreamWriter> ptm;
   std::unique_ptr<texture::RtiWriter> rti;
@@ -76,13 +75,10 @@ struct CoefficientWriter {
   }
 };
 
-CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& path,
-                              const fs::path& replaces) {
+CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& path) {
   CoefficientWriter w;
   if (format == fit::CoefficientFormat::kPtm) {
-    texture::PtmWriteOptions o;
-    o.replaces = replaces;
-    w.ptm = std::make_unique<texture::PtmStreamWriter>(path, o);
+    w.ptm = std::make_unique<texture::PtmStreamWriter>(path);
   } else {
     w.rti = std::make_unique<texture::RtiWriter>(path);
   }
@@ -128,11 +124,10 @@ void run_fit(const FitArgs& args) {
                 plan.selection->texels, plan.selection->stride, plan.selection->folds,
                 plan.selection->lights, plan.selection->seconds, plan.selection->table().c_str());
   }
-  // Every output is staged and committed together once all are written: a failure anywhere
-  // leaves none of them.
-  OutputSet outputs;
+  // Every output reaches its path together with the others once all are written (the
+  // command's OutputTransaction, apps/main.cc): a failure anywhere leaves none of them.
   const fs::path out_path(args.output);
-  CoefficientWriter writer = make_writer(plan.format, outputs.add(out_path), out_path);
+  CoefficientWriter writer = make_writer(plan.format, out_path);
   fit::FitRunReport run;
   run.fit =
       fit::fit_capture(lights, plan.options, writer.sink(), request.wants_maps ? &maps : nullptr);
@@ -143,22 +138,21 @@ void run_fit(const FitArgs& args) {
 
   const ImageWriteOptions exr{PixelFormat::kF32};
   if (maps.want_residual_map) {
-    write_image(outputs.add(args.residual_map), maps.residual_map.view(), exr);
+    write_image(args.residual_map, maps.residual_map.view(), exr);
   }
   if (maps.want_outlier_counts) {
-    write_image(outputs.add(args.outlier_map), maps.outlier_counts.view(), exr);
+    write_image(args.outlier_map, maps.outlier_counts.view(), exr);
   }
   if (!args.albedo.empty()) {
     const bool png = fs::path(args.albedo).extension() == ".png";
-    write_image(outputs.add(args.albedo), maps.albedo.view(),
+    write_image(args.albedo, maps.albedo.view(),
                 ImageWriteOptions{png ? PixelFormat::kU16 : PixelFormat::kF32});
   }
   if (maps.want_labels) {
-    fit::write_label_images(args.labels, maps, lights, run.fit.width, run.fit.height, &outputs);
+    fit::write_label_images(args.labels, maps, lights, run.fit.width, run.fit.height);
   }
-  if (!args.normals.empty()) write_normal_map(outputs.add(args.normals), maps.normals.view());
-  if (!args.report.empty()) write_file_atomic(outputs.add(args.report), run.to_json());
-  outputs.commit();
+  if (!args.normals.empty()) write_normal_map(args.normals, maps.normals.view());
+  if (!args.report.empty()) write_file_atomic(args.report, run.to_json());
   std::printf("%s", run.brief().c_str());
 }
 

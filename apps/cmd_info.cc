@@ -8,6 +8,7 @@
 #include "commands.h"
 #include "ptmkit/texture/ptm.h"
 #include "ptmkit/texture/rti.h"
+#include "ptmkit/texture/web_folder.h"
 
 namespace ptmkit::app {
 
@@ -48,7 +49,53 @@ void run_rti_info(const InfoArgs& args) {
               s.file_bytes_per_texel, s.map_bytes_per_texel);
 }
 
+// A relight/OpenLIME web folder: its info.json, checked, and each plane's scale and bias.
+void run_web_info(const InfoArgs& args) {
+  const texture::WebFolderInfo w = texture::read_web_info(args.input);
+  if (args.json) {
+    nlohmann::json j;
+    j["file"] = args.input;
+    j["format"] = "web";
+    j["type"] = w.type;
+    j["colorspace"] = w.colorspace;
+    j["layout"] = w.layout;
+    j["width"] = w.width;
+    j["height"] = w.height;
+    j["nplanes"] = w.nplanes;
+    j["jpegs"] = w.jpegs();
+    j["quality"] = w.quality;
+    j["scale"] = w.scale;
+    j["bias"] = w.bias;
+    j["pixel_size_mm"] = w.pixel_size_mm;
+    j["lights"] = w.lights.size();
+    if (w.layout == "deepzoom") {
+      j["tile_size"] = w.tile_size;
+      j["overlap"] = w.overlap;
+    }
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("%s: web folder, type %s, colour space %s, layout %s, %d x %d texels\n",
+              args.input.c_str(), w.type.c_str(), w.colorspace.c_str(), w.layout.c_str(), w.width,
+              w.height);
+  std::printf("  %d planes in %d JPEGs, quality %d", w.nplanes, w.jpegs(), w.quality);
+  if (w.layout == "deepzoom") std::printf(", tiles %d px, overlap %d", w.tile_size, w.overlap);
+  std::printf("\n");
+  if (w.pixel_size_mm > 0) std::printf("  pixel size %.6g mm\n", w.pixel_size_mm);
+  if (!w.lights.empty()) std::printf("  %zu capture lights listed\n", w.lights.size());
+  std::printf("  planes (coefficient = (byte / 255 - bias) * scale):\n");
+  std::printf("    plane      scale        bias\n");
+  for (int k = 0; k < w.nplanes; ++k) {
+    std::printf("    %5d  %10.6g  %10.6g\n", k, w.scale[static_cast<std::size_t>(k)],
+                w.bias[static_cast<std::size_t>(k)]);
+  }
+}
+
 void run_info(const InfoArgs& args) {
+  if (texture::is_web_folder(args.input)) {
+    run_web_info(args);
+    return;
+  }
   if (texture::looks_like_rti(args.input)) {
     run_rti_info(args);
     return;
@@ -60,7 +107,10 @@ void run_info(const InfoArgs& args) {
     nlohmann::json j;
     j["file"] = args.input;
     j["version"] = std::string(texture::to_string(info.version));
-    j["format"] = std::string(texture::to_string(info.format));
+    j["format"] = std::string(texture::format_name(info.format, info.compression));
+    if (info.compression == texture::PtmCompression::kJpeg) {
+      j["jpeg_quality"] = info.compression_parameter;
+    }
     j["width"] = info.width;
     j["height"] = info.height;
     j["scales"] = q.scales;
@@ -80,7 +130,12 @@ void run_info(const InfoArgs& args) {
   }
   std::printf("%s: %s %s, %d x %d texels\n", args.input.c_str(),
               std::string(texture::to_string(info.version)).c_str(),
-              std::string(texture::to_string(info.format)).c_str(), info.width, info.height);
+              std::string(texture::format_name(info.format, info.compression)).c_str(), info.width,
+              info.height);
+  if (info.compression == texture::PtmCompression::kJpeg) {
+    std::printf("  JPEG planes, quality %d (read into the uncompressed layout)\n",
+                info.compression_parameter);
+  }
   std::printf("  %zu bytes: header %zu, data %zu, trailing %zu\n", info.file_bytes,
               info.header_bytes, info.data_bytes, info.trailing_bytes);
   std::printf("  coefficients in 0..255 units:\n");
@@ -100,9 +155,11 @@ void add_info_command(CLI::App& root) {
   auto args = std::make_shared<InfoArgs>();
   CLI::App* cmd = root.add_subcommand(
       "info",
-      "Describe a .ptm or an HSH .rti: format, size, scales and biases or basis, coefficient "
-      "ranges, memory.");
-  cmd->add_option("input", args->input, "Texture file (.ptm or .rti)")->required();
+      "Describe a .ptm (any readable variant), an HSH .rti or a relight/OpenLIME web folder: "
+      "format, size, scales and biases or basis, coefficient ranges, memory.");
+  cmd->add_option("input", args->input,
+                  "Texture: .ptm, .rti, or a web folder (the folder or its info.json)")
+      ->required();
   cmd->add_flag("--json", args->json, "Print JSON instead of text");
   cmd->callback([args] { run_info(*args); });
 }

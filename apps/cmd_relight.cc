@@ -17,6 +17,7 @@
 #include "ptmkit/texture/ptm8.h"
 #include "ptmkit/texture/relight.h"
 #include "ptmkit/texture/rti.h"
+#include "ptmkit/texture/texture_file.h"
 
 namespace fs = std::filesystem;
 
@@ -59,14 +60,6 @@ Eigen::Vector3d parse_light(const std::string& text) {
   return v;
 }
 
-// .rti (HSH) by extension, or by content for other names; .ptm otherwise.
-bool is_rti(const std::string& path) {
-  const fs::path p(path);
-  if (p.extension() == ".rti") return true;
-  if (p.extension() == ".ptm") return false;
-  return texture::looks_like_rti(p);
-}
-
 void run_relight(const RelightArgs& args) {
   const bool one = !args.light.empty();
   if (one == !args.lights.empty()) {
@@ -102,9 +95,13 @@ void run_relight(const RelightArgs& args) {
     } catch (const Error& e) {
       throw Error(std::string("--light: ") + e.what());
     }
-    if (is_rti(args.input)) {
-      if (args.integer) throw Error(args.input + ": --integer needs a .ptm (it is an .rti)");
-      const CoefficientMap rti = texture::read_rti(args.input, space);
+    const texture::LoadedTexture tex = texture::read_texture(args.input, space);
+    if (tex.is_hsh) {
+      if (args.integer) {
+        throw Error(args.input + ": --integer needs a polynomial texture (it is " + tex.format +
+                    ")");
+      }
+      const CoefficientMap& rti = tex.hsh;
       const Image image = texture::relight(rti, dir, relight_options);
       write_image(args.output, image.view(), write);
       std::printf("relit %s (%d x %d, HSH %d terms) from (%.4f, %.4f, %.4f): wrote %s\n",
@@ -112,7 +109,7 @@ void run_relight(const RelightArgs& args) {
                   args.output.c_str());
       return;
     }
-    const CoefficientMap map = texture::read_ptm(args.input, space);
+    const CoefficientMap& map = tex.ptm;
     if (dir.z() <= 0.0) {
       std::fprintf(stderr,
                    "ptmkit: warning: the light is at or below the horizon (z <= 0): "
@@ -143,10 +140,10 @@ void run_relight(const RelightArgs& args) {
   options.write = write;
   options.mask = args.mask;
   options.report_json = args.report;
+  const texture::LoadedTexture tex = texture::read_texture(args.input, space);
   const texture::RelightSetReport report =
-      is_rti(args.input)
-          ? texture::relight_light_set(texture::read_rti(args.input, space), lights, options)
-          : texture::relight_light_set(texture::read_ptm(args.input, space), lights, options);
+      tex.is_hsh ? texture::relight_light_set(tex.hsh, lights, options)
+                 : texture::relight_light_set(tex.ptm, lights, options);
   for (const auto& e : report.entries) {
     if (e.compared) {
       std::printf("  %-32s PSNR %6.2f dB  mean abs %6.2f grey\n",
@@ -164,10 +161,12 @@ void add_relight_command(CLI::App& root) {
   auto args = std::make_shared<RelightArgs>();
   CLI::App* cmd = root.add_subcommand(
       "relight",
-      "Relight a .ptm or an HSH .rti: one image lit from --light x,y,z, or one image per light of "
-      "a .lp "
+      "Relight a .ptm (any readable variant, JPEG included), an HSH .rti or a relight/OpenLIME "
+      "web folder (the folder or its info.json): one image lit from --light x,y,z, or one image "
+      "per light of a .lp "
       "(--lights) compared with that light's photo where it exists (PSNR, mean abs error).");
-  cmd->add_option("input", args->input, "Texture: polynomial texture map (.ptm) or HSH .rti")
+  cmd->add_option("input", args->input,
+                  "Texture: .ptm, HSH .rti, or a web folder (its folder or info.json)")
       ->required();
   auto* light = cmd->add_option(
       "--light", args->light,

@@ -22,8 +22,8 @@ void add_direct_command(CLI::App& root);
 void add_compare_command(CLI::App& root);
 void add_calibrate_command(CLI::App& root);
 void add_calibrate_board_commands(CLI::App* calibrate);  // calibrate camera, calibrate plane
-// `export` and its `web` child; the other `export` children are added by
-// add_export_convert_commands(export_cmd) where that is built.
+// `export` and its children: `web`, and `ptm`, `rti` (added by
+// add_export_convert_commands(export_cmd)).
 void add_export_command(CLI::App& root);
 void add_view_command(CLI::App& root);
 
@@ -41,6 +41,8 @@ void add_web_export_flags(CLI::App* cmd, WebExportArgs* args);
 texture::WebExportReport export_texture_to_web(const std::string& input,
                                                const std::filesystem::path& dir,
                                                const texture::WebExportOptions& options);
+// export ptm, export rti (format conversions), children of the `export` parent.
+void add_export_convert_commands(CLI::App& export_cmd);
 
 // The robust solvers' tuning flags (--shadow-k, --highlight-k, --readmit-k, --dark-fraction,
 // --keep-within-grey, --no-fill), bound to *robust; shared by fit and compare.

@@ -9,6 +9,13 @@ target_compile_options(ptmkit_build_flags INTERFACE
 if(PTMKIT_NATIVE)
   target_compile_options(ptmkit_build_flags INTERFACE -march=native)
 endif()
+if(PTMKIT_FUZZ)
+  # Every library instrumented for coverage; the fuzz targets link libFuzzer's main.
+  target_compile_options(ptmkit_build_flags INTERFACE
+    -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer
+    -fno-sanitize-recover=undefined -g)
+  target_link_options(ptmkit_build_flags INTERFACE -fsanitize=address,undefined)
+endif()
 if(PTMKIT_SANITIZE)
   target_compile_options(ptmkit_build_flags INTERFACE
     -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)

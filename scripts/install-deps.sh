@@ -6,7 +6,7 @@ packages=(
   libeigen3-dev libceres-dev libopencv-dev libapriltag-dev
   libopenimageio-dev openimageio-tools libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
-  time
+  time clang libclang-rt-14-dev
   libjpeg-dev libcpp-httplib-dev
 )
 # The browser tests' chromium and node (scripts/install-browser-deps.sh; never fatal).

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
@@ -190,7 +191,7 @@ TEST(FitCli, AFailedMapLeavesNoPtm) {
   EXPECT_FALSE(std::filesystem::exists(ptm));
   EXPECT_FALSE(std::filesystem::exists(report));
   for (const auto& e : std::filesystem::directory_iterator(dir.path())) {
-    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+    EXPECT_NE(e.path().filename().string().rfind(std::string(kTempPrefix), 0), 0u) << e.path();
   }
   // The same command with a folder that exists writes all of them.
   const test::RunResult ok =

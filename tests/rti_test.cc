@@ -91,10 +91,10 @@ TEST(RtiFile, WriteReadRoundTrip) {
     const auto again = dir / "again.rti";
     texture::write_rti(again, r);
     EXPECT_EQ(read_bytes(again).size(), read_bytes(path).size());
-    // Header as the viewers expect it.
+    // Header as the viewers expect it: CRLF line ends, as CHI's HSH fitter writes.
     const std::string bytes = read_bytes(path);
-    std::string head = "#HSH1.2\n3\n7 5 3\n";
-    head.append(std::to_string(terms)).append(" 2 1\n");
+    std::string head = "#HSH1.2\r\n3\r\n7 5 3\r\n";
+    head.append(std::to_string(terms)).append(" 2 1\r\n");
     EXPECT_EQ(bytes.substr(0, head.size()), head);
     EXPECT_TRUE(texture::looks_like_rti(path));
   }
@@ -111,10 +111,11 @@ TEST(RtiFile, MalformedFilesNameTheFile) {
     std::string content;
     const char* expect;
   };
-  const std::string head = "#HSH1.2\n3\n4 3 3\n9 2 1\n";
+  const std::string head = "#HSH1.2\r\n3\r\n4 3 3\r\n9 2 1\r\n";
   const std::vector<Case> cases = {
       {"truncated.rti", bytes.substr(0, bytes.size() - 10), "too short"},
-      {"type.rti", "#c\n2\n4 3 3\n9 2 1\n" + bytes.substr(head.size()), "RTI type 2"},
+      {"type.rti", "#c\n2\n4 3 3\n9 2 1\n" + bytes.substr(head.size()),
+       "RTI type 2 is not supported (supported: "},
       {"terms.rti", "#c\n3\n4 3 3\n7 2 1\n" + bytes.substr(head.size()), "7 basis terms"},
       {"components.rti", "#c\n3\n4 3 1\n9 2 1\n" + bytes.substr(head.size()), "components"},
       {"size.rti", "#c\n3\n-4 3 3\n9 2 1\n", "bad size"},

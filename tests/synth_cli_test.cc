@@ -142,3 +142,119 @@ TEST(SynthCli, HelpDescribesEveryFlag) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(SynthCli, PhotoPresetWritesImagesTruthAndMasks) {
+  ScratchDir dir;
+  const fs::path out = dir / "photo";
+  const auto r = run_ptmkit({"synth", "--preset", "photo-dome", "--out", out.string(), "--width",
+                             "320", "--lights", "rings:40:3", "--seed", "5"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(list_files(out),
+            (std::vector<std::string>{"image_001.jpg", "image_002.jpg", "image_003.jpg",
+                                      "lights.lp", "truth.json"}));
+  EXPECT_EQ(list_files(out / "truth"), (std::vector<std::string>{"sphere_1.png", "sphere_2.png"}));
+  const auto info = ptmkit::probe_image(out / "image_001.jpg");
+  EXPECT_EQ(info.width, 320);
+  EXPECT_EQ(info.height, 180);
+  EXPECT_EQ(ptmkit::read_lp(out / "lights.lp").size(), 3u);
+  std::ifstream in(out / "truth.json");
+  const auto j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["kind"], "photo");
+  EXPECT_EQ(j["seed"], 5);
+  EXPECT_EQ(j["camera"]["model"], "pinhole");
+  EXPECT_DOUBLE_EQ(j["camera"]["focal_px"].get<double>(), 640.0);
+  ASSERT_EQ(j["spheres"].size(), 2u);
+  EXPECT_EQ(j["spheres"][0]["material"], "black-glossy");
+  EXPECT_EQ(j["spheres"][0]["highlight_px"].size(), 3u);
+  EXPECT_GT(j["spheres"][0]["circle"]["radius_px"].get<double>(), 15.0);
+  EXPECT_EQ(j["distractor"]["kind"], "coin");
+  EXPECT_EQ(j["artefacts"]["flare"]["on"], true);
+  EXPECT_EQ(j["sensor"]["jpeg_quality"], 92);
+}
+
+TEST(SynthCli, PhotoFlagsOverrideThePreset) {
+  ScratchDir dir;
+  const fs::path out = dir / "photo";
+  const auto r = run_ptmkit({"synth",
+                             "--preset",
+                             "photo-dome",
+                             "--out",
+                             out.string(),
+                             "--width",
+                             "320",
+                             "--lights",
+                             "rings:40:2",
+                             "--spheres-material",
+                             "glass",
+                             "--spheres",
+                             "1",
+                             "--no-flare",
+                             "--no-bloom",
+                             "--no-vignetting",
+                             "--no-noise",
+                             "--environment",
+                             "lit",
+                             "--distractor",
+                             "dish",
+                             "--jpeg-quality",
+                             "60",
+                             "--no-bases",
+                             "--no-scene-reflections",
+                             "--windows",
+                             "1",
+                             "--lamps",
+                             "0"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream in(out / "truth.json");
+  const auto j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["spheres"].size(), 1u);
+  EXPECT_EQ(j["spheres"][0]["material"], "glass");
+  EXPECT_TRUE(j["spheres"][0]["base"].is_null());
+  EXPECT_EQ(j["artefacts"]["flare"]["on"], false);
+  EXPECT_EQ(j["artefacts"]["bloom"]["on"], false);
+  EXPECT_EQ(j["artefacts"]["vignetting"]["on"], false);
+  EXPECT_EQ(j["artefacts"]["noise"]["on"], false);
+  EXPECT_EQ(j["environment"]["kind"], "lit");
+  EXPECT_EQ(j["environment"]["windows"], 1);
+  EXPECT_EQ(j["environment"]["lamps"], 0);
+  EXPECT_EQ(j["environment"]["reflect_scene"], false);
+  EXPECT_EQ(j["distractor"]["kind"], "dish");
+  EXPECT_EQ(j["sensor"]["jpeg_quality"], 60);
+  // A lower JPEG quality writes smaller files.
+  const fs::path hq = dir / "hq";
+  ASSERT_EQ(run_ptmkit({"synth", "--preset", "photo-dome", "--out", hq.string(), "--width", "320",
+                        "--lights", "rings:40:2", "--jpeg-quality", "98"})
+                .exit_code,
+            0);
+  const fs::path lq = dir / "lq";
+  ASSERT_EQ(run_ptmkit({"synth", "--preset", "photo-dome", "--out", lq.string(), "--width", "320",
+                        "--lights", "rings:40:2", "--jpeg-quality", "40"})
+                .exit_code,
+            0);
+  EXPECT_LT(fs::file_size(lq / "image_001.jpg"), fs::file_size(hq / "image_001.jpg"));
+}
+
+TEST(SynthCli, PhotoAndReliefFlagsAreNotMixed) {
+  ScratchDir dir;
+  auto r =
+      run_ptmkit({"synth", "--preset", "photo-dome", "--out", (dir / "a").string(), "--ks", "0.5"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--ks applies to the relief presets"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "a"));
+  r = run_ptmkit({"synth", "--out", (dir / "b").string(), "--no-flare"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--no-flare applies to the photo presets"), std::string::npos) << r.err;
+  r = run_ptmkit({"synth", "--preset", "photo-dome", "--out", (dir / "c").string(),
+                  "--spheres-material", "wood"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("unknown sphere material 'wood'"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "c"));
+  r = run_ptmkit(
+      {"synth", "--preset", "photo-dome", "--out", (dir / "d").string(), "--size", "300"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("aspect ratio"), std::string::npos) << r.err;
+}
+
+}  // namespace

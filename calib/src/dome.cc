@@ -11,6 +11,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/json_file.h"
 #include "ptmkit/core/light_layout.h"
+#include "ptmkit/core/limits.h"
 
 namespace ptmkit::calib {
 
@@ -143,6 +144,10 @@ LightSet read_dome_json(const std::filesystem::path& path, const DomeOptions& de
   const auto& lights = j["lights"];
   if (!lights.is_array() || lights.empty()) {
     throw Error(where(path) + ": \"lights\" must be a non-empty array");
+  }
+  if (static_cast<long long>(lights.size()) > kMaxLights) {
+    throw Error(where(path) + ": " + std::to_string(lights.size()) + " lights, more than the " +
+                std::to_string(kMaxLights) + " allowed");
   }
   LightSet set;
   set.source = path;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include <Eigen/Cholesky>
@@ -12,6 +13,7 @@
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "sphere_detail.h"
 
 namespace ptmkit::calib {
 
@@ -22,10 +24,11 @@ double luma_at(ConstImageViewF img, int x, int y) {
   return img.channels >= 3 ? luma(p[0], p[1], p[2]) : p[0];
 }
 
-// Geometric least-squares circle through points: algebraic (Kasa) start, Gauss-Newton on
-// |p - c| - r, then once more without points beyond 3 robust scales.
-Circle fit_circle(const std::vector<Eigen::Vector2d>& pts,
-                  std::vector<Eigen::Vector2d>* inliers = nullptr) {
+}  // namespace
+
+namespace detail {
+
+Circle fit_circle(const std::vector<Eigen::Vector2d>& pts, std::vector<Eigen::Vector2d>* inliers) {
   if (pts.size() < 5) throw Error("too few edge points to fit a circle");
   Eigen::MatrixXd a(static_cast<Eigen::Index>(pts.size()), 3);
   Eigen::VectorXd b(static_cast<Eigen::Index>(pts.size()));
@@ -76,6 +79,12 @@ Circle fit_circle(const std::vector<Eigen::Vector2d>& pts,
   if (inliers != nullptr) *inliers = std::move(use);
   return c;
 }
+
+}  // namespace detail
+
+namespace {
+
+using detail::fit_circle;
 
 double bilinear(const cv::Mat& m, double x, double y) {
   const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
@@ -136,8 +145,10 @@ std::vector<cv::Vec3f> hough_circles(const cv::Mat& composite) {
   return circles;
 }
 
-// Sub-pixel edge along rays from a rough circle: the largest radial derivative of the
-// composite near the rim, then a trimmed geometric circle fit.
+}  // namespace
+
+namespace detail {
+
 Circle refine_circle(const Circle& rough, const cv::Mat& composite) {
   const int w = composite.cols, h = composite.rows;
   cv::Mat smooth;
@@ -195,6 +206,10 @@ Circle refine_circle(const Circle& rough, const cv::Mat& composite) {
   return c;
 }
 
+}  // namespace detail
+
+namespace {
+using detail::refine_circle;
 }  // namespace
 
 Circle find_sphere(const std::vector<Image>& images) {
@@ -576,25 +591,34 @@ cv::Point to_point(const Eigen::Vector2d& p, int shift) {
 
 }  // namespace
 
-Image sphere_overlay(const Image& image, const SphereReport& report, std::size_t light_index) {
+Image sphere_overlay(const Image& image, const SphereReport& report, std::size_t light_index,
+                     double scale, int text_row) {
   cv::Mat m = to_bgr8(image);
   constexpr int kShift = 4;  // sub-pixel drawing
   const Circle& s = report.sphere;
-  cv::circle(m, to_point(s.centre_px, kShift), static_cast<int>(s.radius_px * (1 << kShift)),
+  const Eigen::Vector2d centre = s.centre_px * scale;
+  cv::circle(m, to_point(centre, kShift), static_cast<int>(s.radius_px * scale * (1 << kShift)),
              cv::Scalar(255, 200, 0), 1, cv::LINE_AA, kShift);
-  cv::drawMarker(m, to_point(s.centre_px, 0), cv::Scalar(255, 200, 0), cv::MARKER_CROSS, 9, 1);
+  cv::drawMarker(m, to_point(centre, 0), cv::Scalar(255, 200, 0), cv::MARKER_CROSS, 9, 1);
   const SphereLight& l = report.lights.at(light_index);
   // Green: used; orange: used but doubtful (an outlier); red: not used.
   const cv::Scalar colour = !l.found    ? cv::Scalar(0, 0, 255)
                             : l.outlier ? cv::Scalar(0, 150, 255)
                                         : cv::Scalar(0, 220, 0);
-  if (l.peak > 0.0) {
-    cv::circle(m, to_point(l.highlight_px, kShift), 6 << kShift, colour, 1, cv::LINE_AA, kShift);
-    cv::drawMarker(m, to_point(l.highlight_px, 0), colour, cv::MARKER_CROSS, 5, 1);
+  if (l.peak > 0.0 && (l.highlight_px.x() != 0.0 || l.highlight_px.y() != 0.0)) {
+    const Eigen::Vector2d h = l.highlight_px * scale;
+    cv::circle(m, to_point(h, kShift), 6 << kShift, colour, 1, cv::LINE_AA, kShift);
+    cv::drawMarker(m, to_point(h, 0), colour, cv::MARKER_CROSS, 5, 1);
   }
   std::string text = std::to_string(light_index) + ": " + l.image.filename().string();
+  if (l.found) {
+    char buf[48];
+    std::snprintf(buf, sizeof(buf), " confidence %.2f", l.confidence);
+    text += buf;
+  }
   if (!l.found || l.outlier) text += " - " + l.flag;
-  cv::putText(m, text, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv::LINE_AA);
+  cv::putText(m, text, cv::Point(6, 18 + 16 * text_row), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1,
+              cv::LINE_AA);
   return from_bgr8(m);
 }
 

@@ -147,13 +147,32 @@ RigReport calibrate_rig(const std::vector<Image>& images,
                         const RigOptions& options) {
   if (const auto err = options.validate(); !err.empty()) throw Error("sphere rig: " + err);
   if (images.empty()) throw Error("sphere rig: no images");
-  const SphereCamera& camera = options.detection.camera;
-  const bool pinhole = camera.focal_px > 0.0;
-  const int w = images[0].width(), h = images[0].height();
-  RigReport report;
   const bool detected = options.spheres.empty();
   const std::vector<Circle> circles =
       detected ? find_spheres(images, options.sphere_count) : options.spheres;
+  std::vector<SphereReport> spheres;
+  for (const Circle& c : circles) {
+    SphereOptions det = options.detection;
+    det.sphere = c;
+    spheres.push_back(calibrate_sphere(images, names, det));
+    spheres.back().sphere_detected = detected;
+  }
+  return refine_rig(std::move(spheres), names, images[0].width(), images[0].height(), options);
+}
+
+RigReport refine_rig(std::vector<SphereReport> spheres,
+                     const std::vector<std::filesystem::path>& names, int w, int h,
+                     const RigOptions& options) {
+  if (const auto err = options.validate(); !err.empty()) throw Error("sphere rig: " + err);
+  if (spheres.empty()) throw Error("sphere rig: no spheres");
+  const SphereCamera& camera = options.detection.camera;
+  const bool pinhole = camera.focal_px > 0.0;
+  RigReport report;
+  std::vector<Circle> circles;
+  for (const SphereReport& s : spheres) {
+    if (s.lights.size() != names.size()) throw Error("sphere rig: a sphere misses lights");
+    circles.push_back(s.sphere);
+  }
   const std::size_t k_spheres = circles.size();
   report.near = pinhole && options.sphere_radius_mm > 0.0 && k_spheres >= 2;
   if (options.sphere_radius_mm > 0.0 && !report.near) {
@@ -174,13 +193,8 @@ RigReport calibrate_rig(const std::vector<Image>& images,
   report.model = !pinhole      ? "orthographic distant"
                  : report.near ? "pinhole near"
                                : "pinhole distant";
-  for (const Circle& c : circles) {
-    SphereOptions det = options.detection;
-    det.sphere = c;
-    report.spheres.push_back(calibrate_sphere(images, names, det));
-    report.spheres.back().sphere_detected = detected;
-  }
-  const std::size_t n_lights = images.size();
+  report.spheres = std::move(spheres);
+  const std::size_t n_lights = names.size();
   const double rho = report.near ? options.sphere_radius_mm : 1.0;
   const Eigen::Vector2d pp = principal_point(camera, w, h);
   const double f = camera.focal_px;

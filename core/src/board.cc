@@ -11,6 +11,7 @@
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/json_file.h"
+#include "ptmkit/core/limits.h"
 
 namespace ptmkit {
 
@@ -75,7 +76,16 @@ int integer(const json& j, const char* key, const std::string& where) {
   if (!j.contains(key)) throw Error(where + ": missing \"" + key + "\"");
   const json& v = j.at(key);
   if (!v.is_number_integer()) throw Error(where + ": \"" + key + "\" must be an integer");
-  return v.get<int>();
+  // Range-checked in 64 bits: get<int>() would wrap a value beyond int.
+  const bool too_big =
+      v.is_number_unsigned()
+          ? v.get<unsigned long long>() > static_cast<unsigned long long>(kMaxTagId)
+          : v.get<long long>() > kMaxTagId || v.get<long long>() < -kMaxTagId;
+  if (too_big) {
+    throw Error(where + ": \"" + key + "\" is out of range (" + excerpt(v.dump()) + ")");
+  }
+  const long long x = v.get<long long>();
+  return static_cast<int>(x);
 }
 
 Eigen::Vector2d point(const json& v, const std::string& what, const std::string& where) {
@@ -138,6 +148,15 @@ TagBoard grid_board(const std::string& family, double tag_size_mm, int cols, int
     throw Error("board grid: tag_size_mm must be positive");
   }
   if (cols < 1 || rows < 1) throw Error("board grid: cols and rows must be at least 1");
+  const long long tags = static_cast<long long>(cols) * rows;
+  if (tags > kMaxBoardTags) {
+    throw Error("board grid: " + std::to_string(cols) + " x " + std::to_string(rows) +
+                " tags, more than the " + std::to_string(kMaxBoardTags) + " a board may have");
+  }
+  if (first_id > kMaxTagId - (tags - 1)) {
+    throw Error("board grid: first_id " + std::to_string(first_id) + " + " + std::to_string(tags) +
+                " tags passes the largest tag id " + std::to_string(kMaxTagId));
+  }
   if (!(spacing_mm > tag_size_mm) || !std::isfinite(spacing_mm)) {
     throw Error("board grid: spacing_mm (centre to centre) must exceed tag_size_mm");
   }
@@ -189,6 +208,10 @@ TagBoard read_board_json(const std::filesystem::path& path) {
     } else {
       const json& tags = j["tags"];
       if (!tags.is_array()) throw Error(where + ": \"tags\" must be an array");
+      if (static_cast<long long>(tags.size()) > kMaxBoardTags) {
+        throw Error(where + ": " + std::to_string(tags.size()) + " tags, more than the " +
+                    std::to_string(kMaxBoardTags) + " a board may have");
+      }
       for (const json& t : tags) {
         if (!t.is_object()) throw Error(where + ": each tag must be an object");
         const int id = integer(t, "id", where);

@@ -122,6 +122,30 @@ std::vector<T> quantise(ConstImageViewF image, double full_scale) {
 
 }  // namespace
 
+namespace {
+
+// Some encoders (PNG, TIFF) do not report a failed write (a full disk, a file size limit):
+// the written file is decoded once more before it may replace anything, so a short or
+// damaged file is an error rather than an output.
+void verify_written_image(const fs::path& temp, const fs::path& shown,
+                          const OIIO::ImageSpec& want) {
+  auto in = OIIO::ImageInput::open(temp.string());
+  const std::string failed = where(shown) + ": write failed: the written file does not read back";
+  if (!in) throw Error(failed + " (disk full?): " + internal::oiio_error(nullptr));
+  const OIIO::ImageSpec& got = in->spec();
+  if (got.width != want.width || got.height != want.height || got.nchannels != want.nchannels) {
+    throw Error(failed + " with its size (disk full?)");
+  }
+  std::vector<unsigned char> buf(got.image_bytes());
+  const bool ok = in->read_image(0, 0, 0, got.nchannels, got.format, buf.data());
+  const bool error = in->has_error();
+  const std::string message = error ? in->geterror() : std::string();
+  in->close();
+  if (!ok || error) throw Error(failed + " (disk full?): " + message);
+}
+
+}  // namespace
+
 void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOptions& options) {
   if (image.empty()) throw Error(where(path) + ": nothing to write (empty image)");
   for (int y = 0; y < image.height; ++y) {
@@ -173,6 +197,7 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
   }
   if (!ok) throw Error(where(path) + ": write failed: " + out->geterror());
   if (!out->close()) throw Error(where(path) + ": write failed: " + out->geterror());
+  verify_written_image(out_file.temp_path(), path, spec);
   out_file.commit();
 }
 

@@ -4,11 +4,13 @@
 #include <string>
 
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace ptmkit {
 
 nlohmann::json read_json_object(const std::filesystem::path& path, std::string_view kind) {
   const std::string where = path.string();
+  checked_input_size(path, kMaxTextFileBytes, std::string(kind));
   std::ifstream in(path);
   if (!in) throw Error(where + ": cannot open the " + std::string(kind));
   nlohmann::json j;

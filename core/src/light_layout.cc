@@ -9,6 +9,7 @@
 
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/limits.h"
 
 namespace ptmkit {
 
@@ -77,6 +78,7 @@ std::vector<Eigen::Vector3d> geodesic_dome(int frequency) {
 
 std::vector<Ring> parse_rings(std::string_view spec) {
   std::vector<Ring> rings;
+  long long total = 0;
   std::string s(spec);
   if (s.empty()) throw Error("empty ring specification (expected elevation:count,...)");
   std::stringstream all(s);
@@ -87,7 +89,7 @@ std::vector<Ring> parse_rings(std::string_view spec) {
     std::string p;
     while (std::getline(one, p, ':')) parts.push_back(p);
     if (parts.size() < 2 || parts.size() > 3) {
-      throw Error("ring '" + item + "': expected elevation:count[:azimuth_offset]");
+      throw Error("ring '" + excerpt(item) + "': expected elevation:count[:azimuth_offset]");
     }
     Ring ring;
     try {
@@ -101,18 +103,24 @@ std::vector<Ring> parse_rings(std::string_view spec) {
         if (used != parts[2].size()) throw std::invalid_argument("trailing");
       }
     } catch (const std::exception&) {
-      throw Error("ring '" + item + "': not numbers (expected elevation:count[:azimuth_offset])");
+      throw Error("ring '" + excerpt(item) +
+                  "': not numbers (expected elevation:count[:azimuth_offset])");
     }
     if (!(ring.elevation_deg > 0.0 && ring.elevation_deg <= 90.0)) {
-      throw Error("ring '" + item + "': elevation must be in (0, 90] degrees");
+      throw Error("ring '" + excerpt(item) + "': elevation must be in (0, 90] degrees");
     }
-    if (ring.count < 1 || ring.count > 100000) {
-      throw Error("ring '" + item + "': count must be at least 1");
+    if (ring.count < 1 || ring.count > kMaxRingLights) {
+      throw Error("ring '" + excerpt(item) + "': count must be 1.." +
+                  std::to_string(kMaxRingLights));
     }
     if (!std::isfinite(ring.azimuth_offset_deg)) {
-      throw Error("ring '" + item + "': azimuth offset is not finite");
+      throw Error("ring '" + excerpt(item) + "': azimuth offset is not finite");
     }
     rings.push_back(ring);
+    total += ring.elevation_deg >= 90.0 ? 1 : ring.count;
+    if (total > kMaxLights) {
+      throw Error("ring specification: more than " + std::to_string(kMaxLights) + " lights in all");
+    }
   }
   return rings;
 }

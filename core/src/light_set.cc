@@ -10,6 +10,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -58,9 +59,10 @@ bool parse_int(const std::string& s, long* out) {
 }  // namespace
 
 LightSet read_lp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(where(path) + ": light file not found");
+  checked_input_size(path, kMaxTextFileBytes, "light file");
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(where(path) + ": cannot open light file");
   LightSet set;
   set.source = path;
@@ -86,7 +88,11 @@ LightSet read_lp(const fs::path& path) {
       long n = 0;
       if (!parse_int(tokens[0], &n) || n < 0) {
         throw Error(where(path, line_no) + ": expected a light count or 'image x y z', got '" +
-                    tokens[0] + "'");
+                    excerpt(tokens[0]) + "'");
+      }
+      if (n > kMaxLights) {
+        throw Error(where(path, line_no) + ": the count line says " + std::to_string(n) +
+                    " lights, more than the " + std::to_string(kMaxLights) + " allowed");
       }
       declared = n;
       declared_line = line_no;
@@ -100,10 +106,16 @@ LightSet read_lp(const fs::path& path) {
     const std::size_t n = tokens.size();
     std::string name = tokens[0];
     for (std::size_t i = 1; i + 3 < n; ++i) name += " " + tokens[i];
+    if (name.size() > kMaxPathChars) {
+      throw Error(where(path, line_no) + ": image name of " + std::to_string(name.size()) +
+                  " characters, longer than a path may be (" + std::to_string(kMaxPathChars) +
+                  "): '" + excerpt(name) + "'");
+    }
     Eigen::Vector3d v;
     for (int k = 0; k < 3; ++k) {
       if (!parse_double(tokens[n - 3 + k], &v[k])) {
-        throw Error(where(path, line_no) + ": '" + tokens[n - 3 + k] + "' is not a number");
+        throw Error(where(path, line_no) + ": '" + excerpt(tokens[n - 3 + k]) +
+                    "' is not a number");
       }
     }
     if (!v.allFinite()) {
@@ -114,7 +126,7 @@ LightSet read_lp(const fs::path& path) {
     // Leave vectors that are unit to rounding untouched, so write -> read is exact.
     if (std::abs(norm - 1.0) > 4.0 * std::numeric_limits<double>::epsilon()) v /= norm;
     if (v.z() <= 0.0) {
-      throw Error(where(path, line_no) + ": light direction has z <= 0 (" + tokens[n - 1] +
+      throw Error(where(path, line_no) + ": light direction has z <= 0 (" + excerpt(tokens[n - 1]) +
                   "): the light is at or below the sample plane, which lights nothing");
     }
     Light light;
@@ -122,10 +134,13 @@ LightSet read_lp(const fs::path& path) {
     light.direction = v;
     const std::string key = light.image.string();
     if (auto it = seen.find(key); it != seen.end()) {
-      throw Error(where(path, line_no) + ": image '" + name + "' is listed twice (first on line " +
-                  std::to_string(it->second) + ")");
+      throw Error(where(path, line_no) + ": image '" + excerpt(name) +
+                  "' is listed twice (first on line " + std::to_string(it->second) + ")");
     }
     seen.emplace(key, line_no);
+    if (static_cast<long long>(set.lights.size()) >= kMaxLights) {
+      throw Error(where(path, line_no) + ": more than " + std::to_string(kMaxLights) + " lights");
+    }
     set.lights.push_back(std::move(light));
   }
   if (in.bad()) throw Error(where(path) + ": read error");

@@ -9,7 +9,7 @@
 namespace ptmkit::fit {
 
 void write_label_images(const std::filesystem::path& dir, const FitOutputs& outputs,
-                        const LightSet& lights, int width, int height, OutputSet* staged) {
+                        const LightSet& lights, int width, int height) {
   const std::size_t n = lights.size();
   const std::size_t texels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (outputs.labels.size() != texels * n) {
@@ -24,9 +24,7 @@ void write_label_images(const std::filesystem::path& dir, const FitOutputs& outp
       lab.data()[t] = static_cast<float>(outputs.labels[t * n + i]) / 255.0f;
     }
     const auto name = lights.lights[i].image.filename().replace_extension(".png");
-    const std::filesystem::path target = dir / name;
-    write_image(staged != nullptr ? staged->add(target) : target, lab.view(),
-                ImageWriteOptions{PixelFormat::kU8});
+    write_image(dir / name, lab.view(), ImageWriteOptions{PixelFormat::kU8});
   }
 }
 

@@ -15,6 +15,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/core/plane.h"
 #include "ptmkit/synth/synth.h"
 #include "render.h"
@@ -198,7 +199,7 @@ std::vector<Eigen::Vector3d> resolve_lights(const SynthOptions& o) {
   } else if (fs::path(o.lights).extension() == ".lp") {
     dirs = read_lp(o.lights).directions();
   } else {
-    throw Error("synth: unknown light layout '" + o.lights +
+    throw Error("synth: unknown light layout '" + excerpt(o.lights) +
                 "' (expected icosa, dome49, rings:ELEV:COUNT[:AZ],... or an .lp file)");
   }
   require(!dirs.empty(), "no lights in '" + o.lights + "'");
@@ -251,6 +252,9 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
   report.height = scene.height;
   auto written = [&](const fs::path& p) { report.files.push_back(p); };
 
+  // Committed as a whole: the images, lights.lp and truth reach the folder together once all
+  // are written; a failure leaves the folder as it was.
+  OutputTransaction outputs;
   ensure_directory(out_dir);
   const fs::path truth_dir = out_dir / "truth";
   nlohmann::json truth_files = nlohmann::json::object();
@@ -442,6 +446,7 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
     written(json_path);
   }
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  outputs.commit();
   return report;
 }
 

@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 
+#include "optics.h"
 #include "ptmkit/core/error.h"
 
 namespace ptmkit::synth {
@@ -51,22 +52,19 @@ Image render_sphere_rig(const SphereRigOptions& o) {
         n = {q.x(), q.y(), -std::sqrt(1.0 - rho2)};
       }
     } else {
-      d = Eigen::Vector3d((u - o.principal_px.x()) / o.focal_px,
-                          (v - o.principal_px.y()) / o.focal_px, 1.0)
-              .normalized();
+      d = detail::pinhole_ray(u, v, o.focal_px, o.principal_px);
       double nearest = std::numeric_limits<double>::infinity();
       for (const auto& [c, rad] : spheres) {
-        const double b = d.dot(c);
-        const double disc = b * b - (c.squaredNorm() - rad * rad);
-        if (disc <= 0.0 || b - std::sqrt(disc) >= nearest) continue;
+        const double t = detail::intersect_sphere(Eigen::Vector3d::Zero(), d, c, rad);
+        if (!(t < nearest)) continue;
         hit = true;
-        nearest = b - std::sqrt(disc);
+        nearest = t;
         hit_point = nearest * d;
         n = (hit_point - c).normalized();
       }
     }
     if (!hit) return o.background;
-    const Eigen::Vector3d r = d - 2.0 * d.dot(n) * n;
+    const Eigen::Vector3d r = detail::reflect(d, n);
     const Eigen::Vector3d to_light =
         o.light_position_mm ? Eigen::Vector3d((*o.light_position_mm - hit_point).normalized())
                             : l_cam;

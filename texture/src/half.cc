@@ -9,6 +9,7 @@
 #include "ptm_internal.h"
 
 #if (defined(__x86_64__) || defined(__i386__)) && !defined(PTMKIT_NO_X86_SIMD)
+#include <cpuid.h>
 #include <immintrin.h>
 #define PTMKIT_HALF_X86 1
 #endif
@@ -128,7 +129,13 @@ __attribute__((target("avx,f16c"))) void half_and_range_f16c(const float* in, st
   range_portable(in + k, n - k, r);
 }
 
-const bool kHaveF16C = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+// F16C from CPUID leaf 1 (clang's __builtin_cpu_supports does not know "f16c").
+bool have_f16c() {
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  return __builtin_cpu_supports("avx") && __get_cpuid(1, &a, &b, &c, &d) != 0 &&
+         (c & bit_F16C) != 0;
+}
+const bool kHaveF16C = have_f16c();
 const bool kHaveAvx2 = __builtin_cpu_supports("avx2");
 
 }  // namespace

@@ -17,6 +17,8 @@
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
+#include "ptmkit/core/limits.h"
+#include "ptmkit/texture/formats.h"
 
 namespace fs = std::filesystem;
 
@@ -30,13 +32,20 @@ std::string_view to_string(PtmFormat format) {
   return format == PtmFormat::kRGB ? "PTM_FORMAT_RGB" : "PTM_FORMAT_LRGB";
 }
 
+std::string_view format_name(PtmFormat format, PtmCompression compression) {
+  if (compression == PtmCompression::kJpeg) {
+    return format == PtmFormat::kRGB ? "PTM_FORMAT_JPEG_RGB" : "PTM_FORMAT_JPEG_LRGB";
+  }
+  return to_string(format);
+}
+
 int PtmInfo::bytes_per_texel() const { return internal::bytes_per_texel(format); }
 
 // ---------------------------------------------------------------------------------------------
 // Quantisation
 
 PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
-                                    const std::array<double, kPtmTerms>& hi) {
+                                    const std::array<double, kPtmTerms>& hi, bool integer_scales) {
   PtmQuantisation q;
   for (int i = 0; i < kPtmTerms; ++i) {
     const double l = std::min(lo[i], 0.0);
@@ -44,6 +53,19 @@ PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
     if (!(h - l > 0.0)) {
       q.scales[i] = 1.0f;
       q.biases[i] = 0;
+      continue;
+    }
+    if (integer_scales) {
+      // The smallest whole scale s with an integer bias b reaching both ends:
+      // b >= -l / s and 255 - b >= h / s.
+      for (double s = std::max(1.0, std::ceil((h - l) / 255.0));; s += 1.0) {
+        const double b = std::ceil(-l / s - 1e-9);
+        if (b + std::ceil(h / s - 1e-9) <= 255.0) {
+          q.scales[i] = static_cast<float>(s);
+          q.biases[i] = static_cast<int>(b);
+          break;
+        }
+      }
       continue;
     }
     const double ideal = -l / (h - l) * 255.0;
@@ -156,7 +178,7 @@ std::string PtmFile::canonical_header() const {
   std::string h;
   h += to_string(version);
   h += '\n';
-  h += to_string(format);
+  h += format_name(format, compression);
   h += '\n';
   h += std::to_string(width) + '\n' + std::to_string(height) + '\n';
   for (int i = 0; i < kPtmTerms; ++i) {
@@ -254,9 +276,11 @@ bool parse_number(std::string_view s, T* value) {
 struct Header {
   PtmVersion version = PtmVersion::k1_2;
   PtmFormat format = PtmFormat::kRGB;
+  PtmCompression compression = PtmCompression::kNone;
   int width = 0;
   int height = 0;
   PtmQuantisation quantisation;
+  internal::JpegPtmHeader jpeg;
   std::size_t header_bytes = 0;
 };
 
@@ -281,19 +305,26 @@ Header parse_header(const std::uint8_t* data, std::size_t size, const fs::path& 
     h.format = PtmFormat::kRGB;
   } else if (format == "PTM_FORMAT_LRGB") {
     h.format = PtmFormat::kLRGB;
+  } else if (format == "PTM_FORMAT_JPEG_RGB") {
+    h.format = PtmFormat::kRGB;
+    h.compression = PtmCompression::kJpeg;
+  } else if (format == "PTM_FORMAT_JPEG_LRGB") {
+    h.format = PtmFormat::kLRGB;
+    h.compression = PtmCompression::kJpeg;
   } else {
-    static constexpr std::string_view kKnown[] = {"PTM_FORMAT_LUM",        "PTM_FORMAT_PAL_RGB",
-                                                  "PTM_FORMAT_PAL_LRGB",   "PTM_FORMAT_JPEG_RGB",
-                                                  "PTM_FORMAT_JPEG_LRGB",  "PTM_FORMAT_JPEGLS_RGB",
-                                                  "PTM_FORMAT_JPEGLS_LRGB"};
-    const bool known = std::find(std::begin(kKnown), std::end(kKnown), format) != std::end(kKnown);
-    throw Error(tokens.at() + ": " + (known ? "format " : "unknown format '") + printable(format) +
-                (known ? " is not supported" : "'") +
-                " (supported: PTM_FORMAT_RGB and PTM_FORMAT_LRGB, uncompressed)");
+    // PTM 1.2 names PTM_FORMAT_LUM, PTM_FORMAT_PTM_LUT, PTM_FORMAT_PTM_C_LUT and
+    // PTM_FORMAT_JPEGLS_RGB/LRGB; anything else is not a format at all.
+    const bool named = format.substr(0, 11) == "PTM_FORMAT_";
+    throw Error(tokens.at() + ": " +
+                unsupported_variant((named ? "format " : "unknown format '") + printable(format) +
+                                    (named ? "" : "'")));
+  }
+  if (h.version == PtmVersion::k1_1 && h.compression != PtmCompression::kNone) {
+    throw Error(tokens.at() + ": " + unsupported_variant("PTM_1.1 " + printable(format)));
   }
   if (h.version == PtmVersion::k1_1 && h.format != PtmFormat::kLRGB) {
-    throw Error(tokens.at() + ": PTM_1.1 " + std::string(to_string(h.format)) +
-                " is not supported (PTM_1.1 is read for PTM_FORMAT_LRGB only)");
+    throw Error(tokens.at() + ": " +
+                unsupported_variant("PTM_1.1 " + std::string(to_string(h.format))));
   }
 
   auto dimension = [&](const char* what) {
@@ -331,15 +362,64 @@ Header parse_header(const std::uint8_t* data, std::size_t size, const fs::path& 
   for (int i = 0; i < kPtmTerms; ++i) {
     const std::string what = "bias " + std::to_string(i);
     const std::string_view t = tokens.next(what.c_str());
+    // Any integer: negative biases exist in the wild (see ptm.h).
     int b = 0;
-    if (!parse_number(t, &b) || b < 0 || b > 255) {
-      throw Error(tokens.at() + ": " + what + " '" + printable(t) +
-                  "' is not an integer in 0..255");
+    if (!parse_number(t, &b) || b < -kMaxPtmBias || b > kMaxPtmBias) {
+      throw Error(tokens.at() + ": " + what + " '" + printable(t) + "' is not an integer in -" +
+                  std::to_string(kMaxPtmBias) + ".." + std::to_string(kMaxPtmBias));
     }
     h.quantisation.biases[i] = b;
   }
+  if (h.compression == PtmCompression::kJpeg) {
+    const int n = internal::jpeg_planes(h.format);
+    auto integers = [&](const char* what, std::vector<int>* out, int lo, int hi) {
+      out->resize(static_cast<std::size_t>(n));
+      for (int k = 0; k < n; ++k) {
+        const std::string label = std::string(what) + " " + std::to_string(k);
+        const std::string_view t = tokens.next(label.c_str());
+        int v = 0;
+        if (!parse_number(t, &v) || v < lo || v > hi) {
+          throw Error(tokens.at() + ": " + label + " '" + printable(t) + "' is not an integer in " +
+                      std::to_string(lo) + ".." + std::to_string(hi));
+        }
+        (*out)[static_cast<std::size_t>(k)] = v;
+      }
+    };
+    auto sizes = [&](const char* what, std::vector<std::size_t>* out) {
+      out->resize(static_cast<std::size_t>(n));
+      for (int k = 0; k < n; ++k) {
+        const std::string label = std::string(what) + " " + std::to_string(k);
+        const std::string_view t = tokens.next(label.c_str());
+        unsigned long long v = 0;
+        if (!parse_number(t, &v) || v > (1ULL << 40)) {
+          throw Error(tokens.at() + ": " + label + " '" + printable(t) + "' is not a byte count");
+        }
+        (*out)[static_cast<std::size_t>(k)] = static_cast<std::size_t>(v);
+      }
+    };
+    {
+      const std::string_view t = tokens.next("compression parameter");
+      if (!parse_number(t, &h.jpeg.quality)) {
+        throw Error(tokens.at() + ": compression parameter '" + printable(t) +
+                    "' is not an integer");
+      }
+    }
+    integers("transform", &h.jpeg.transforms, 0, 3);
+    integers("motion vector x", &h.jpeg.motion_x, -kMaxPtmSide, kMaxPtmSide);
+    integers("motion vector y", &h.jpeg.motion_y, -kMaxPtmSide, kMaxPtmSide);
+    integers("plane order", &h.jpeg.order, 0, n - 1);
+    integers("reference plane", &h.jpeg.reference, -1, n - 1);
+    sizes("JPEG stream size", &h.jpeg.stream_bytes);
+    sizes("side information size", &h.jpeg.side_bytes);
+  }
   h.header_bytes = tokens.end_of_header();
   return h;
+}
+
+std::size_t data_bytes(const Header& h) {
+  if (h.compression == PtmCompression::kJpeg) return h.jpeg.data_bytes();
+  return static_cast<std::size_t>(h.width) * static_cast<std::size_t>(h.height) *
+         static_cast<std::size_t>(internal::bytes_per_texel(h.format));
 }
 
 std::size_t data_bytes(PtmFormat format, int width, int height) {
@@ -350,9 +430,13 @@ std::size_t data_bytes(PtmFormat format, int width, int height) {
 std::vector<std::uint8_t> read_bytes(const fs::path& path, std::size_t limit) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(where(path) + ": no such file");
-  if (fs::is_directory(path, ec)) throw Error(where(path) + ": is a folder, expected a .ptm file");
-  const std::uintmax_t size = fs::file_size(path, ec);
-  if (ec) throw Error(where(path) + ": cannot read: " + ec.message());
+  if (fs::is_directory(path, ec))
+    throw Error(where(path) +
+                ": is a folder without an info.json (not a web folder), expected a .ptm file");
+  // Regular files only (a device never ends), read only if they fit in memory.
+  const std::uintmax_t size =
+      checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".ptm file");
+  check_allocation(path, std::min<std::uintmax_t>(size, limit), "the file's bytes");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(where(path) + ": cannot open for reading");
   std::vector<std::uint8_t> bytes(static_cast<std::size_t>(std::min<std::uintmax_t>(size, limit)));
@@ -371,8 +455,10 @@ PtmInfo info_from(const Header& h, const fs::path& path, std::size_t file_bytes)
   info.width = h.width;
   info.height = h.height;
   info.quantisation = h.quantisation;
+  info.compression = h.compression;
+  info.compression_parameter = h.jpeg.quality;
   info.header_bytes = h.header_bytes;
-  info.data_bytes = data_bytes(h.format, h.width, h.height);
+  info.data_bytes = data_bytes(h);
   info.file_bytes = file_bytes;
   const std::size_t used = info.header_bytes + info.data_bytes;
   info.trailing_bytes = file_bytes > used ? file_bytes - used : 0;
@@ -393,27 +479,44 @@ PtmInfo read_ptm_info(const fs::path& path) {
 PtmFile read_ptm_file(const fs::path& path) {
   std::vector<std::uint8_t> bytes = read_bytes(path, std::numeric_limits<std::size_t>::max());
   const Header h = parse_header(bytes.data(), bytes.size(), path);
-  const std::size_t expected = data_bytes(h.format, h.width, h.height);
+  // Declared sizes are checked against the file before anything of that size is allocated.
+  const std::size_t expected = data_bytes(h);
   const std::size_t present = bytes.size() - h.header_bytes;
   if (present < expected) {
     throw Error(where(path) + ": binary data truncated: " + std::to_string(h.width) + " x " +
-                std::to_string(h.height) + " " + std::string(to_string(h.format)) + " needs " +
-                std::to_string(expected) + " bytes after the header, found " +
+                std::to_string(h.height) + " " + std::string(format_name(h.format, h.compression)) +
+                " needs " + std::to_string(expected) + " bytes after the header, found " +
                 std::to_string(present));
+  }
+  if (present > expected) {
+    // Not tolerated: a header line too many or a wrong declared size shifts every texel.
+    throw Error(where(path) + ": " + std::to_string(present - expected) +
+                " bytes after the binary block: " + std::to_string(h.width) + " x " +
+                std::to_string(h.height) + " " + std::string(to_string(h.format)) + " needs " +
+                std::to_string(expected) +
+                " (a damaged file, or a header that does not describe the data)");
   }
   PtmFile f;
   f.version = h.version;
   f.format = h.format;
+  f.compression = h.compression;
+  f.compression_parameter = h.jpeg.quality;
   f.width = h.width;
   f.height = h.height;
   f.quantisation = h.quantisation;
-  f.header.assign(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(h.header_bytes));
   const auto data_begin = bytes.begin() + static_cast<std::ptrdiff_t>(h.header_bytes);
   const auto data_end = data_begin + static_cast<std::ptrdiff_t>(expected);
   f.trailing.assign(data_end, bytes.end());
+  if (h.compression == PtmCompression::kJpeg) {
+    // The header describes streams that are not kept: a rewrite writes its own.
+    f.data = internal::decode_jpeg_planes(bytes.data() + h.header_bytes, expected, h.jpeg, h.format,
+                                          h.width, h.height, path);
+    return f;
+  }
+  f.header.assign(bytes.begin(), data_begin);
   // Reuse the read buffer for the data block: no second full-size copy.
   bytes.erase(data_end, bytes.end());
-  bytes.erase(bytes.begin(), data_begin);
+  bytes.erase(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(h.header_bytes));
   f.data = std::move(bytes);
   return f;
 }
@@ -427,10 +530,18 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
   if (file.version == PtmVersion::k1_1 && file.format != PtmFormat::kLRGB) {
     throw Error(where(path) + ": PTM_1.1 can only be written as PTM_FORMAT_LRGB");
   }
+  if (file.version == PtmVersion::k1_1 && file.compression != PtmCompression::kNone) {
+    throw Error(where(path) + ": PTM_1.1 has no JPEG variant");
+  }
+  if (file.compression == PtmCompression::kJpeg &&
+      (file.compression_parameter < 1 || file.compression_parameter > 100)) {
+    throw Error(where(path) + ": JPEG quality " + std::to_string(file.compression_parameter) +
+                " is not in 1..100");
+  }
   for (int i = 0; i < kPtmTerms; ++i) {
     const float s = file.quantisation.scales[i];
     const int b = file.quantisation.biases[i];
-    if (!std::isfinite(s) || s == 0.0f || b < 0 || b > 255) {
+    if (!std::isfinite(s) || s == 0.0f || b < -kMaxPtmBias || b > kMaxPtmBias) {
       throw Error(where(path) + ": invalid scale or bias for coefficient " + std::to_string(i));
     }
   }
@@ -440,14 +551,19 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
                 " bytes; the header implies " + std::to_string(expected));
   }
   std::string header = file.canonical_header();
-  if (!file.header.empty()) {
+  std::vector<std::uint8_t> jpeg_block;
+  if (file.compression == PtmCompression::kJpeg) {
+    std::string tail;
+    internal::encode_jpeg_planes(file, file.compression_parameter, &tail, &jpeg_block);
+    header += tail;
+  } else if (!file.header.empty()) {
     // Keep the header as read if it still describes these fields exactly.
     try {
       const auto* raw = reinterpret_cast<const std::uint8_t*>(file.header.data());
       const Header h = parse_header(raw, file.header.size(), path);
       if (h.header_bytes == file.header.size() && h.version == file.version &&
-          h.format == file.format && h.width == file.width && h.height == file.height &&
-          h.quantisation == file.quantisation) {
+          h.format == file.format && h.compression == PtmCompression::kNone &&
+          h.width == file.width && h.height == file.height && h.quantisation == file.quantisation) {
         header = file.header;
       }
     } catch (const Error&) {
@@ -459,8 +575,10 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
     std::ofstream f(out.temp_path(), std::ios::binary | std::ios::trunc);
     if (!f) throw Error(where(path) + ": cannot open for writing");
     f.write(header.data(), static_cast<std::streamsize>(header.size()));
-    f.write(reinterpret_cast<const char*>(file.data.data()),
-            static_cast<std::streamsize>(file.data.size()));
+    const std::vector<std::uint8_t>& block =
+        file.compression == PtmCompression::kJpeg ? jpeg_block : file.data;
+    f.write(reinterpret_cast<const char*>(block.data()),
+            static_cast<std::streamsize>(block.size()));
     f.write(reinterpret_cast<const char*>(file.trailing.data()),
             static_cast<std::streamsize>(file.trailing.size()));
     f.flush();
@@ -522,13 +640,17 @@ PtmFile encode_ptm(const CoefficientMap& map, const PtmWriteOptions& options,
     lo[i] *= 255.0;
     hi[i] *= 255.0;
   }
-  const PtmQuantisation q = choose_quantisation(lo, hi);
+  const PtmQuantisation q = choose_quantisation(lo, hi, options.integer_scales);
   return internal::encode(source, map.width, map.height, format, q, options, report);
 }
 
 PtmWriteReport write_ptm(const fs::path& path, const CoefficientMap& map,
                          const PtmWriteOptions& options) {
   PtmWriteReport report;
+  if (map.width > 0 && !map.coeffs.empty()) {
+    check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width,
+                       polynomial_count(map.model) * kPtmTerms);
+  }
   PtmFile file;
   try {
     file = encode_ptm(map, options, &report);
@@ -591,14 +713,7 @@ CoefficientMap read_ptm(const fs::path& path, ColourSpace colour_space) {
 PtmSummary summarise_ptm(const fs::path& path) {
   const PtmFile file = read_ptm_file(path);
   PtmSummary s;
-  Header h;
-  h.version = file.version;
-  h.format = file.format;
-  h.width = file.width;
-  h.height = file.height;
-  h.quantisation = file.quantisation;
-  h.header_bytes = file.header.size();
-  s.info = info_from(h, path, file.header.size() + file.data.size() + file.trailing.size());
+  s.info = read_ptm_info(path);
   const auto& q = file.quantisation;
   std::array<int, kPtmTerms> bmin, bmax;
   bmin.fill(255);

@@ -171,6 +171,9 @@ void write_ptm8(const fs::path& folder, const Ptm8Texture& t) {
   const fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   std::error_code ec;
   if (!fs::is_directory(parent, ec)) throw Error(where(parent) + ": no such folder");
+  // The files are assembled in a temporary folder that is then renamed: they must exist at
+  // once, even inside a transaction (the folder's rename is the commit).
+  OutputTransaction::Immediate immediate;
   TempDir tmp;
   std::string tmp_name = ".";
   tmp_name += target.filename().string();

@@ -9,7 +9,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "ptmkit/core/light_layout.h"
@@ -18,6 +20,31 @@
 namespace ptmkit::texture::internal {
 
 inline int bytes_per_texel(PtmFormat format) { return format == PtmFormat::kRGB ? 18 : 9; }
+
+// The JPEG part of a PTM_FORMAT_JPEG_* header (ptm.h), N = jpeg_planes(format) entries each.
+struct JpegPtmHeader {
+  int quality = 0;
+  std::vector<int> transforms, motion_x, motion_y, order, reference;
+  std::vector<std::size_t> stream_bytes, side_bytes;
+  // Bytes of the binary block: every stream and its side information.
+  [[nodiscard]] std::size_t data_bytes() const {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < stream_bytes.size(); ++i) n += stream_bytes[i] + side_bytes[i];
+    return n;
+  }
+};
+inline int jpeg_planes(PtmFormat format) { return format == PtmFormat::kRGB ? 18 : 9; }
+
+// Decodes the streams at `data` (`size` bytes: exactly the binary block) into the uncompressed
+// PTM 1.2 layout. Errors name `path` and the plane.
+std::vector<std::uint8_t> decode_jpeg_planes(const std::uint8_t* data, std::size_t size,
+                                             const JpegPtmHeader& header, PtmFormat format,
+                                             int width, int height,
+                                             const std::filesystem::path& path);
+// Encodes the uncompressed layout of `file` (version 1.2) as JPEG planes at `quality`: the
+// header lines after the biases (with their line ends) and the binary block.
+void encode_jpeg_planes(const PtmFile& file, int quality, std::string* header_tail,
+                        std::vector<std::uint8_t>* block);
 inline int planes(PtmFormat format) { return format == PtmFormat::kRGB ? 3 : 1; }
 
 // std::round (halves away from zero) for |t| < 2^62, inline: the libm call was a measurable

@@ -18,6 +18,7 @@
 #include "ptm_internal.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/core/raw_file.h"
 #include "ptmkit/texture/ptm.h"
 
@@ -221,7 +222,7 @@ void PtmStreamWriter::begin(const CoefficientLayout& layout) {
   // too): a 12-megapixel RGB fit over its previous output took 0.1 s less
   // (docs/PERFORMANCE.md). The file's contents are untouched, so a failed run leaves it as it
   // was; only clean pages go.
-  drop_cached_pages(options_.replaces.empty() ? path_ : options_.replaces);
+  drop_cached_pages(path_);
   s.begun = true;
 }
 
@@ -267,7 +268,13 @@ void PtmStreamWriter::write_rows(int y0, int rows, const float* coeffs, const fl
     s.lo[static_cast<std::size_t>(i)] = range.lo[static_cast<std::size_t>(i)] + 0.0f;
     s.hi[static_cast<std::size_t>(i)] = range.hi[static_cast<std::size_t>(i)] + 0.0f;
   }
-  if (!range.finite) s.finite = false;
+  if (!range.finite) {
+    // Name the texel (the inputs, not their half-float rounding, are what is wrong).
+    const int per_texel = polynomial_count(s.model) * kPtmTerms;
+    check_coefficients(path_, coeffs, band_texels * static_cast<std::size_t>(per_texel), s.width,
+                       per_texel, y0);
+    s.finite = false;
+  }
   if (s.model == ColourModel::kLRGB) {
     std::uint8_t* rgb = s.rgb.data() + first * 3;
     colour_bytes(colour, band_texels * 3, rgb);
@@ -472,7 +479,7 @@ void PtmStreamWriter::end() {
   meta.format = s.format;
   meta.width = s.width;
   meta.height = s.height;
-  meta.quantisation = choose_quantisation(lo, hi);
+  meta.quantisation = choose_quantisation(lo, hi, options_.integer_scales);
   const PtmQuantisation& q = meta.quantisation;
   const std::string header = meta.canonical_header();
   const int np = internal::planes(s.format);

@@ -61,25 +61,6 @@ nlohmann::json number_or_null(double v) {
   return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
 }
 
-// Removes what a failed batch wrote, so a failure leaves nothing behind.
-class BatchCleanup {
- public:
-  ~BatchCleanup() {
-    if (done_) return;
-    std::error_code ec;
-    for (const auto& p : written_) fs::remove(p, ec);
-    if (!created_dir_.empty()) fs::remove(created_dir_, ec);  // only if empty
-  }
-  void created_dir(const fs::path& dir) { created_dir_ = dir; }
-  void wrote(const fs::path& p) { written_.push_back(p); }
-  void done() { done_ = true; }
-
- private:
-  std::vector<fs::path> written_;
-  fs::path created_dir_;
-  bool done_ = false;
-};
-
 }  // namespace
 
 std::string RelightSetReport::brief() const {
@@ -175,11 +156,12 @@ RelightSetReport relight_set_impl(int map_width, int map_height, ColourSpace map
     }
   }
 
-  BatchCleanup cleanup;
+  // The folder is committed as a whole: images replace earlier ones only once every image
+  // and the report are written; a failure leaves the folder as it was.
+  OutputTransaction outputs;
   std::error_code ec;
   if (!fs::exists(options.out_dir, ec)) {
     ensure_directory(options.out_dir);
-    cleanup.created_dir(options.out_dir);
   } else if (!fs::is_directory(options.out_dir, ec)) {
     throw Error(where(options.out_dir) + ": exists and is not a folder");
   }
@@ -193,9 +175,7 @@ RelightSetReport relight_set_impl(int map_width, int map_height, ColourSpace map
     e.reference = light.image;
     e.light_dir = normalised_light(light.direction);
     const Image relit = render(e.light_dir);
-    const bool existed = fs::exists(e.output, ec);
     write_image(e.output, relit.view(), options.write);
-    if (!existed) cleanup.wrote(e.output);
     if (has_photo[i]) {
       const Image photo = read_image(light.image);
       try {
@@ -221,7 +201,7 @@ RelightSetReport relight_set_impl(int map_width, int map_height, ColourSpace map
     write_file_atomic(options.report_json, report.to_json());
     report.report_json = options.report_json;
   }
-  cleanup.done();
+  outputs.commit();
   return report;
 }
 

@@ -12,6 +12,8 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
+#include "ptmkit/texture/formats.h"
 
 namespace fs = std::filesystem;
 
@@ -46,20 +48,18 @@ int hsh_order(int terms) {
   }
 }
 
-namespace {
-
-Basis basis_of_terms(int terms) {
+Basis hsh_basis_of_terms(int terms) {
   switch (terms) {
     case 4:
       return Basis::kHsh2;
     case 9:
       return Basis::kHsh3;
-    default:
+    case 16:
       return Basis::kHsh4;
+    default:
+      throw Error("an HSH basis has 4, 9 or 16 terms, not " + std::to_string(terms));
   }
 }
-
-}  // namespace
 
 RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
   const int t = map.terms();
@@ -74,6 +74,7 @@ RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
   if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * t) {
     throw Error(where(path) + ": the map's size does not match its coefficients");
   }
+  check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width, 3 * t);
   // Per term: the range over every texel and channel.
   std::vector<float> lo(t, std::numeric_limits<float>::infinity());
   std::vector<float> hi(t, -std::numeric_limits<float>::infinity());
@@ -93,7 +94,9 @@ RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
     scale[k] = hi[k] > lo[k] ? hi[k] - lo[k] : 1e-6f;
   }
   std::ostringstream header;
-  header << "#HSH1.2\n3\n" << map.width << ' ' << map.height << " 3\n" << t << " 2 1\n";
+  // CRLF, as CHI's HSH fitter writes: a widely used Java viewer counts header bytes assuming
+  // two-byte line ends.
+  header << "#HSH1.2\r\n3\r\n" << map.width << ' ' << map.height << " 3\r\n" << t << " 2 1\r\n";
   std::string blob = header.str();
   const std::size_t head = blob.size();
   blob.resize(head + 2 * sizeof(float) * t + map.coeffs.size());
@@ -142,7 +145,7 @@ std::vector<long long> parse_ints(const fs::path& path, const std::string& line,
   std::string rest;
   in >> rest;
   if (static_cast<int>(v.size()) != expected || !rest.empty()) {
-    throw Error(where(path) + ": expected " + what + ", got '" + line + "'");
+    throw Error(where(path) + ": expected " + what + ", got '" + excerpt(line) + "'");
   }
   return v;
 }
@@ -150,6 +153,10 @@ std::vector<long long> parse_ints(const fs::path& path, const std::string& line,
 }  // namespace
 
 CoefficientMap read_rti(const fs::path& path, ColourSpace colour_space) {
+  // Regular files only (a device never ends), read only if they fit in memory.
+  const std::uintmax_t file_bytes =
+      checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".rti file");
+  check_allocation(path, file_bytes, "the file's bytes");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw Error(where(path) + ": cannot open the file");
   const std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
@@ -163,8 +170,7 @@ CoefficientMap read_rti(const fs::path& path, ColourSpace colour_space) {
   } while (!line.empty() && line[0] == '#');
   const long long type = parse_ints(path, line, 1, "the RTI type (3 = HSH)")[0];
   if (type != 3) {
-    throw Error(where(path) + ": RTI type " + std::to_string(type) +
-                " is not supported (only 3, hemispherical harmonics)");
+    throw Error(where(path) + ": " + unsupported_variant("RTI type " + std::to_string(type)));
   }
   if (!next_line(data, &pos, &line)) throw Error(where(path) + ": the header ends early");
   const auto size = parse_ints(path, line, 3, "'width height components'");
@@ -190,14 +196,28 @@ CoefficientMap read_rti(const fs::path& path, ColourSpace colour_space) {
   }
   const int w = static_cast<int>(size[0]);
   const int h = static_cast<int>(size[1]);
-  CoefficientMap map({w, h, basis_of_terms(t), ColourModel::kRGB, colour_space});
+  // The declared size is checked against the bytes present and the memory available before
+  // the map is allocated (a short file must not cost gigabytes).
   const std::size_t floats = 2 * sizeof(float) * static_cast<std::size_t>(t);
-  const std::size_t expected = floats + map.coeffs.size();
+  const std::uint64_t coeff_count =
+      checked_multiply(path, static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h),
+                       3 * static_cast<std::uint64_t>(t));
+  const std::uint64_t expected = floats + coeff_count;
   const std::size_t present = data.size() - pos;
   if (present < expected) {
-    throw Error(where(path) + ": the binary block is too short: expected " +
+    throw Error(where(path) + ": the binary block is too short: " + std::to_string(w) + " x " +
+                std::to_string(h) + " x " + std::to_string(t) + " terms need " +
                 std::to_string(expected) + " bytes, found " + std::to_string(present));
   }
+  if (present > expected) {
+    throw Error(where(path) + ": " + std::to_string(present - expected) +
+                " bytes after the binary block (a damaged file, or a header that does not "
+                "describe it)");
+  }
+  check_allocation(path, checked_multiply(path, coeff_count, sizeof(float)),
+                   "the " + std::to_string(w) + " x " + std::to_string(h) + " x " +
+                       std::to_string(t) + "-term coefficients");
+  CoefficientMap map({w, h, hsh_basis_of_terms(t), ColourModel::kRGB, colour_space});
   std::vector<float> scale(t), bias(t);
   std::memcpy(scale.data(), data.data() + pos, sizeof(float) * t);
   std::memcpy(bias.data(), data.data() + pos + sizeof(float) * t, sizeof(float) * t);

@@ -319,7 +319,9 @@ std::vector<unsigned char> decode_jpeg(const std::vector<unsigned char>& data, i
 
 // --- the folder ------------------------------------------------------------------------
 
-// A temporary folder beside the target, removed unless committed.
+// A temporary folder beside the target, removed unless committed. The files written into it
+// must exist at once, even inside the command's OutputTransaction: renaming the folder is
+// what commits them.
 class TempFolder {
  public:
   explicit TempFolder(const fs::path& target) : target_(target) {
@@ -372,6 +374,7 @@ class TempFolder {
   }
 
  private:
+  OutputTransaction::Immediate immediate_;
   fs::path target_;
   fs::path path_;
 };

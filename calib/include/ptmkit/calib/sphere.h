@@ -134,10 +134,11 @@ struct SphereReport {
 void drop_lights(const std::vector<int>& indices, SphereReport* report);
 
 // What was detected, to be looked at: the image with the sphere's circle and centre and the
-// highlight (green: used, orange: used but an outlier, red: flagged, with the reason), RGB,
-// full scale 1.
+// highlight (green: used, orange: used but an outlier, red: flagged, with the reason) and
+// its confidence, RGB, full scale 1. `scale`: the image's size over the photographs' (a
+// downscaled overlay); `text_row`: which line of the caption (one per sphere).
 [[nodiscard]] Image sphere_overlay(const Image& image, const SphereReport& report,
-                                   std::size_t light_index);
+                                   std::size_t light_index, double scale = 1.0, int text_row = 0);
 
 // A polar plot of the usable lights (azimuth around, elevation from the rim (0 degrees) to
 // the centre (90)), each labelled with its index; flagged lights listed in red. Square, RGB.

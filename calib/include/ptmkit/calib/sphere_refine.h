@@ -121,6 +121,14 @@ struct RigReport {
                                       const std::vector<std::filesystem::path>& names,
                                       const RigOptions& options);
 
+// The refinement alone, from highlights already measured: one report per sphere (its circle
+// and one SphereLight per image, in the order of `names`), for images of w x h pixels.
+// calibrate_rig measures them with calibrate_sphere; calibrate_sphere_stack (sphere_stack.h)
+// streams the photographs instead.
+[[nodiscard]] RigReport refine_rig(std::vector<SphereReport> spheres,
+                                   const std::vector<std::filesystem::path>& names, int w, int h,
+                                   const RigOptions& options);
+
 // The usable lights (directions, and positions for near lights); flagged-unusable and
 // dropped ones left out.
 [[nodiscard]] LightSet rig_light_set(const RigReport& report);

@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
@@ -64,10 +63,9 @@ struct FitOutputs {
 
 // Writes outputs.labels as one 8-bit image per light into `dir` (created if missing), named
 // after the light's photograph with a .png extension; the codes are `ptmkit synth`'s
-// truth/labels (0 inlier, 1 shadow, 2 highlight). With `staged`, each image is written to
-// its staging path there and moves into place when the set is committed.
+// truth/labels (0 inlier, 1 shadow, 2 highlight).
 void write_label_images(const std::filesystem::path& dir, const FitOutputs& outputs,
-                        const LightSet& lights, int width, int height, OutputSet* staged = nullptr);
+                        const LightSet& lights, int width, int height);
 
 struct FitOptions {
   // The function basis (core/coefficients.h). kPtm (default): the six-term polynomial, every

@@ -26,6 +26,24 @@
 //            B = Y + 1.772 Cb (core/colour.h from_ycbcr applied to (a5, cb, cr)).
 // Reading gives kRGB or kLRGB; see decode_ptm.
 //
+// JPEG-compressed files (PTM_FORMAT_JPEG_RGB, PTM_FORMAT_JPEG_LRGB, PTM 1.2) are read into the
+// same uncompressed layout (PtmFile::data), so everything downstream treats them alike. After
+// the biases their header holds, for N = 18 (RGB) or 9 (LRGB) component planes: the
+// compression parameter (JPEG quality), N transforms, N horizontal and N vertical motion
+// vectors, N decode-order ranks, N reference planes (-1: none), N JPEG stream sizes and N
+// side-information sizes. Then, per plane in plane order, its greyscale JPEG stream and its side
+// information. Planes 0..5 are a0..a5 (of R, then G, then B for RGB), LRGB's planes 6..8 its
+// R, G, B bytes; JPEG rows are stored rows (bottom-up). Planes are decoded in rank order; a
+// plane with a reference holds a difference: value = stored + ref - 128 (ref replaced by
+// 255 - ref when its transform has bit 0, plane inversion), negative sums wrapped by +256 as
+// RTIViewer and the other public readers do, sums above 255 clamped. Side information is
+// 5-byte records (big-endian 32-bit position in the JPEG's raster order, then the byte) that
+// overwrite single samples after the difference. Motion compensation (transform bit 1, or a
+// non-zero motion vector) is refused: no known writer used it and no public reader applies it.
+//
+// Biases are read as any integer: some encoders write negative ones (a constant-term bias of
+// -7) and every common reader accepts them; a byte still decodes to scale * (byte - bias).
+//
 // Quantisation rule (choose_quantisation): per coefficient index i, shared by every texel and
 // every plane, over the file coefficients' actual range [lo_i, hi_i] widened to include 0.
 // The bias is an integer, so the byte equal to the bias decodes to exactly 0: a coefficient
@@ -52,8 +70,12 @@ namespace ptmkit::texture {
 
 enum class PtmVersion { k1_1, k1_2 };
 enum class PtmFormat { kRGB, kLRGB };
+// How the binary block is stored: raw bytes, or one JPEG stream per component plane.
+enum class PtmCompression { kNone, kJpeg };
 [[nodiscard]] std::string_view to_string(PtmVersion version);  // "PTM_1.1", "PTM_1.2"
 [[nodiscard]] std::string_view to_string(PtmFormat format);    // "PTM_FORMAT_RGB", ...
+// The format line of a file: "PTM_FORMAT_JPEG_LRGB" for (kLRGB, kJpeg), ...
+[[nodiscard]] std::string_view format_name(PtmFormat format, PtmCompression compression);
 
 // The six scales and biases of a file, shared by every texel and every plane.
 struct PtmQuantisation {
@@ -64,8 +86,13 @@ struct PtmQuantisation {
 
 // Quantisation for file coefficients (0..255 units) spanning [lo[i], hi[i]] per index i, by
 // the rule above. Non-finite bounds are a programmer error.
+// With `integer_scales`, every scale is a whole number (the smallest that, with an integer
+// bias, reaches both ends): (byte - bias) * scale is then an integer, so a reader that
+// truncates it to an integer (RTIViewer does) loses nothing; the price is a coarser step for
+// coefficients whose range is under 255 units (docs/FORMATS.md has the measured trade).
 [[nodiscard]] PtmQuantisation choose_quantisation(const std::array<double, kPtmTerms>& lo,
-                                                  const std::array<double, kPtmTerms>& hi);
+                                                  const std::array<double, kPtmTerms>& hi,
+                                                  bool integer_scales = false);
 
 // Header fields of a file.
 struct PtmInfo {
@@ -75,10 +102,12 @@ struct PtmInfo {
   int width = 0;
   int height = 0;
   PtmQuantisation quantisation;
+  PtmCompression compression = PtmCompression::kNone;
+  int compression_parameter = 0;   // JPEG files: the quality their header declares
   std::size_t header_bytes = 0;    // text header, including its last line end
-  std::size_t data_bytes = 0;      // binary block the header implies
+  std::size_t data_bytes = 0;      // binary block the header implies (JPEG: streams + side info)
   std::size_t file_bytes = 0;      // size on disk
-  std::size_t trailing_bytes = 0;  // bytes after the binary block (kept, see PtmFile)
+  std::size_t trailing_bytes = 0;  // bytes after the binary block (read_ptm_file refuses them)
 
   // Bytes per texel in the file: 18 for RGB, 9 for LRGB.
   [[nodiscard]] int bytes_per_texel() const;
@@ -91,10 +120,15 @@ struct PtmFile {
   int width = 0;
   int height = 0;
   PtmQuantisation quantisation;
+  // How the file was (or is to be) stored. data is always the uncompressed layout; a kJpeg
+  // file is written with one JPEG stream per plane at `compression_parameter` quality (1..100;
+  // order 0..N-1, no references, no side information), so a rewrite is not bit-exact.
+  PtmCompression compression = PtmCompression::kNone;
+  int compression_parameter = 0;
   // The binary block in file order (bottom-up rows; planar for 1.2, interleaved for 1.1).
   std::vector<std::uint8_t> data;
-  // Bytes found after the binary block. Tolerated on reading (some writers pad files) and
-  // written back unchanged, so that read -> write is bit-exact.
+  // Bytes written after the binary block. Always empty from read_ptm_file (which refuses a file
+  // with bytes after its block); write_ptm_file writes them after the block.
   std::vector<std::uint8_t> trailing;
   // The header text exactly as read (including its last line end). write_ptm_file writes it
   // verbatim when it still says what the fields above say (so foreign spacing, CRLF and
@@ -116,13 +150,20 @@ struct PtmFile {
 
 // Reads a whole file. Accepted: any whitespace between header items (spaces, tabs, line
 // breaks, CRLF; scales or biases split across lines), trailing spaces on the last header
-// line, bytes after the binary block (kept in `trailing`). Errors (ptmkit::Error naming the
+// line. Errors (ptmkit::Error naming the
 // file and the problem): a missing or unreadable file, a wrong magic, an unsupported version
 // or format (compressed and palette formats, PTM 1.1 RGB), a non-numeric, non-positive or
 // absurd width or height (each at most kMaxPtmSide, W*H at most kMaxPtmTexels), a NaN,
-// infinite or zero scale, a bias that is not an integer in 0..255, a header whose last line
-// is not terminated, and a binary block shorter than the header implies (expected and present
-// byte counts given). Negative scales are accepted: the format allows them.
+// infinite or zero scale, a bias that is not an integer, a header whose last line is not
+// terminated, a binary block shorter or longer than the header implies (expected and present
+// byte counts given: bytes after the block mean the header does not describe the data, e.g. a
+// duplicated header line), a path that is not a regular file, a file larger than the memory
+// available, and for JPEG files a stream that does not decode to a W x H greyscale image, side
+// information that is not whole 5-byte records inside the image, decode ranks that are not a
+// permutation, a reference to a plane not decoded before, and motion compensation. Unsupported
+// variants (PTM_FORMAT_LUM, PTM_FORMAT_PTM_LUT, PTM_FORMAT_PTM_C_LUT, PTM_FORMAT_JPEGLS_*, ...)
+// are refused with texture/formats.h's wording. Negative scales are accepted: the format allows
+// them.
 [[nodiscard]] PtmFile read_ptm_file(const std::filesystem::path& path);
 // The header only (the binary block's presence is not checked; file_bytes says how much is
 // there).
@@ -131,6 +172,8 @@ struct PtmFile {
 void write_ptm_file(const std::filesystem::path& path, const PtmFile& file);
 
 inline constexpr int kMaxPtmSide = 1 << 20;
+// Biases read and written: any integer of at most this magnitude.
+inline constexpr int kMaxPtmBias = 1 << 20;
 inline constexpr std::size_t kMaxPtmTexels = std::size_t{1} << 32;
 
 struct PtmWriteOptions {
@@ -149,10 +192,10 @@ struct PtmWriteOptions {
   // process's own footprint stays bounded. Spilling only the excess rather than everything
   // saved 0.4 s of a 2.4 s fit (docs/PERFORMANCE.md). 0: always in memory.
   std::size_t spill_above_bytes = std::size_t{192} << 20;
-  // PtmStreamWriter writing to a staging path (core's OutputSet, committed later): the file
-  // the output will replace, whose cached pages are then dropped as the output path's would
-  // be (see PtmStreamWriter::begin). Empty: the output path itself.
-  std::filesystem::path replaces;
+  // Whole-number scales (see choose_quantisation), for readers that truncate
+  // (byte - bias) * scale to an integer. Off: the finest scales (the bytes fit has always
+  // written).
+  bool integer_scales = false;
 };
 
 // What quantisation cost.

@@ -5,7 +5,8 @@
 // The HSH basis and its formula: core/hsh.h (the fit uses the same functions, so fit and
 // viewer agree for every light).
 //
-// File layout (.rti, HSH, uncompressed), as written here and accepted on reading:
+// File layout (.rti, HSH, uncompressed), as written here and accepted on reading (header lines
+// are written with CRLF ends, as CHI's HSH fitter does; CRLF and LF are both read):
 //   #HSH1.2                        comment lines starting with '#' (any number)
 //   3                              RTI type: 3 = HSH
 //   W H 3                          width, height, colour components (3)
@@ -31,6 +32,8 @@ namespace ptmkit::texture {
 
 // Terms of an HSH basis of order 2, 3, 4: 4, 9, 16. Throws ptmkit::Error for other orders.
 [[nodiscard]] int hsh_terms(int order);
+// The HSH basis of 4, 9 or 16 terms (core/coefficients.h); throws ptmkit::Error otherwise.
+[[nodiscard]] Basis hsh_basis_of_terms(int terms);
 // Order of a basis with 4, 9 or 16 terms; 0 for any other count.
 [[nodiscard]] int hsh_order(int terms);
 
@@ -71,7 +74,8 @@ class RtiWriter final : public CoefficientSink {
 };
 
 // Reads an uncompressed HSH .rti. Errors (ptmkit::Error naming the file and the problem): a
-// missing or unreadable file, a header that does not parse, an RTI type other than 3, colour
+// missing or unreadable file, a header that does not parse, an RTI type other than 3 (refused
+// with texture/formats.h's wording), colour
 // components other than 3, terms other than 4, 9, 16, an element size other than 1, an
 // absurd size, a non-finite scale or bias, and a binary block shorter than the header implies
 // (expected and present byte counts). The file does not say what the values are: the caller

@@ -1,0 +1,133 @@
+// Sphere calibration of real photographs, streamed: the spheres found from the evidence of
+// the whole stack, the light's highlight told apart from the scene's reflections, and the
+// rig refined (sphere_refine.h). The photographs are read twice in bands of rows and never
+// held decoded: memory is a small analysis copy of each image plus a few full-size planes.
+//
+// Evidence, from one streamed pass:
+//   per image   an analysis copy of its luma, each pixel the maximum of a block of
+//               `scale` x `scale` photo pixels (highlights survive the reduction); scale is
+//               the smallest integer that brings the longest side to analysis_max_side_px
+//   per pixel   over the stack: maximum, mean and median (median on the analysis copy);
+//               what stays still (the sphere, its base, the scene and its reflections) is in
+//               the median, what moves with the light is not
+//   moving spots  per image, the connected spots brighter than the median by a margin
+// Sphere candidates: circles (OpenCV Hough gradient) on contrast-stretched composites (max,
+// mean, median, the reference photo), each refined on the rim's edge, then scored:
+//   rim     fraction of rays from the centre that cross an edge at the circle's radius
+//           (the best composite's; rays outside the frame or hidden below do not count)
+//   track   fraction of the images whose brightest moving spot inside the circle is compact
+//           and lies at its own place: a mirror sphere shows each light at a different point
+//           of one circle; a coin, dish or lens glints at the same few places or lights up
+//           as a whole, so its track is short
+//   score   min(1, rim / 0.3) x track: a rim on a third of the rays counts as a full rim;
+//           neither a rim alone (a coin) nor a track alone (any circle drawn around the
+//           highlights) makes a sphere
+// The `sphere_count` best non-overlapping candidates with score >= min_score are taken; for
+// two or three spheres, of the ten best the set with the highest sum of scores times
+// (1 + agreement) / 2, agreement = its worst pair's share of common images whose spots reflect
+// lights within 20 degrees of each other (pinhole; 30 orthographic): a dish's or coin's moving
+// glint does not reflect the lights as the spheres do, while near lights only lower it;
+// otherwise SphereSearchError lists every candidate and its evidence, and nothing is written.
+//
+// The highlight of a light on a sphere: the moving spots in the circle (the image minus the
+// stack's median, so a reflected window or lamp, which is in every image, cancels), the
+// brightest taken, then located in the photograph at full resolution:
+//   unsaturated  centroid of the brightness above the median within the spot
+//   saturated    the clipped core without its flare streaks and bloom: the pixels at least
+//                half the core's inscribed radius from the clipped region's edge, grown back
+//                by that radius inside it (a morphological opening), their centroid
+// Two moving spots in the circle in most images (a glass ball's surface reflection and its
+// refracted hot spot) are reported (StackCalibration::two_spot_images): the brightest spot
+// is still the one taken.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "ptmkit/calib/sphere.h"
+#include "ptmkit/calib/sphere_refine.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/image.h"
+
+namespace ptmkit::calib {
+
+// A search box in photo pixels (top-left corner, width, height).
+struct PixelBox {
+  int x = 0, y = 0, width = 0, height = 0;
+};
+
+struct SphereSearchOptions {
+  // Search boxes, one per sphere (a sphere is taken in each); empty = the whole frame.
+  std::vector<PixelBox> rois;
+  // Radius range in photo pixels; 0 = from 1/40 of the shorter side to the longer side.
+  double min_radius_px = 0.0;
+  double max_radius_px = 0.0;
+  // A photo of the scene in room light (same size): its rim adds evidence.
+  std::optional<std::filesystem::path> reference;
+  // A candidate below this score (0..1) is refused.
+  double min_score = 0.5;
+  // The analysis copy's longest side, pixels.
+  int analysis_max_side_px = 1280;
+};
+
+struct StackCalibrationOptions {
+  // The rig (spheres given or their count, camera, refinement, highlight thresholds).
+  RigOptions rig;
+  SphereSearchOptions search;
+};
+
+struct SphereCandidate {
+  Circle circle;           // photo pixels
+  double rim = 0.0;        // 0..1
+  double track = 0.0;      // 0..1
+  double score = 0.0;      // 0..1
+  int moving_spots = 0;    // images with a compact moving spot inside
+  int distinct_spots = 0;  // of those, at their own place
+  bool chosen = false;
+  std::string note;  // why refused, or where it came from
+  // Per image, the brightest moving spot inside (photo pixels), if compact.
+  std::vector<std::optional<Eigen::Vector2d>> spots_px;
+};
+
+struct StackCalibration {
+  RigReport rig;
+  std::vector<SphereCandidate> candidates;  // best first; empty when the circles were given
+  int two_spot_images = 0;  // images with a second moving spot of half the first's peak
+  int analysis_scale = 1;
+  int width = 0, height = 0;
+  [[nodiscard]] std::string to_json() const;
+};
+
+// Thrown when the evidence is too weak to name the spheres: carries the candidates.
+class SphereSearchError : public Error {
+ public:
+  SphereSearchError(const std::string& message, std::vector<SphereCandidate> candidates)
+      : Error(message), candidates_(std::move(candidates)) {}
+  [[nodiscard]] const std::vector<SphereCandidate>& candidates() const { return candidates_; }
+
+ private:
+  std::vector<SphereCandidate> candidates_;
+};
+
+// Streams the photographs (all of one size). Throws ptmkit::Error naming a bad file or
+// option, SphereSearchError when the spheres cannot be told.
+[[nodiscard]] StackCalibration calibrate_sphere_stack(
+    const std::vector<std::filesystem::path>& files, const StackCalibrationOptions& options);
+
+// The same from images in memory (tests); `names` label them.
+[[nodiscard]] StackCalibration calibrate_sphere_stack(
+    const std::vector<Image>& images, const std::vector<std::filesystem::path>& names,
+    const StackCalibrationOptions& options);
+
+// The candidates drawn on an image (chosen: green, refused: red, each with its score).
+[[nodiscard]] Image candidates_overlay(const Image& image,
+                                       const std::vector<SphereCandidate>& candidates,
+                                       double scale = 1.0);
+
+// An image reduced by an integer factor (block mean) so that its longest side is at most
+// max_side_px (0 = unchanged); `scale` receives the factor applied (output = input * scale).
+[[nodiscard]] Image downscale_for_overlay(const Image& image, int max_side_px, double* scale);
+
+}  // namespace ptmkit::calib

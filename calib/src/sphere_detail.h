@@ -1,0 +1,24 @@
+// Circle fitting shared by the sphere finders (sphere.cc, sphere_stack.cc); not public.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "ptmkit/calib/sphere.h"
+
+namespace ptmkit::calib::detail {
+
+// Geometric least-squares circle through points: algebraic (Kasa) start, Gauss-Newton on
+// |p - c| - r, then once more without points beyond 3 robust scales. Throws ptmkit::Error
+// with fewer than 5 points or a degenerate fit.
+[[nodiscard]] Circle fit_circle(const std::vector<Eigen::Vector2d>& pts,
+                                std::vector<Eigen::Vector2d>* inliers = nullptr);
+
+// Sub-pixel edge along rays from a rough circle: the largest radial derivative of the
+// composite (CV_32F) within 15% of the radius, then a trimmed geometric circle fit; rays that
+// leave the image are skipped. Returns `rough` when fewer than 20 rays have an edge.
+[[nodiscard]] Circle refine_circle(const Circle& rough, const cv::Mat& composite);
+
+}  // namespace ptmkit::calib::detail

@@ -1,0 +1,14 @@
+// Image headers and pixels through the stack reader (what fit reads), for each file type the
+// project writes; the first byte picks the extension (readers are chosen by it first).
+#include "fuzz_util.h"
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/core/stack_reader.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  if (size == 0) return 0;
+  static const char* const kNames[] = {"input.png", "input.jpg", "input.tif", "input.exr"};
+  const auto path = ptmkit::fuzz::input_file(data + 1, size - 1, kNames[data[0] % 4]);
+  ptmkit::fuzz::expect_value_or_error([&] { (void)ptmkit::probe_image(path); });
+  ptmkit::fuzz::expect_value_or_error([&] { (void)ptmkit::read_stack({path}); });
+  return 0;
+}

@@ -1,0 +1,517 @@
+// Sphere calibration from the stack's evidence (sphere_stack.h): renders with what real
+// photographs add (a coin beside the sphere, a reflected window, clipped highlights with
+// one-sided flare streaks), refusal on weak evidence, search hints, and the real uw-psm
+// chrome sphere found without any hint (skipped where the data is absent).
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <numbers>
+
+#include <gtest/gtest.h>
+
+#include "ptmkit/calib/dome.h"
+#include "ptmkit/calib/sphere.h"
+#include "ptmkit/calib/sphere_stack.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/core/light_set.h"
+#include "ptmkit/core/parallel.h"
+#include "ptmkit/synth/photo.h"
+#include "ptmkit/synth/rig.h"
+#include "test_util.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit::calib {
+namespace {
+
+double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 /
+         std::numbers::pi;
+}
+
+struct Scene {
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  std::vector<Eigen::Vector3d> lights;
+  Eigen::Vector2d centre{0.0, 0.0};
+  double radius = 0.0;
+};
+
+// A 560 x 400 photo: a black glossy sphere (radius 110 px) at (190, 200); a coin (radius 70
+// px) at (430, 220) whose face brightens with the light's elevation and whose relief glints
+// at the same three places under different lights; a window reflected in the sphere (bright
+// in every image); with `flare`, each highlight clipped and given a bright streak to one side.
+Scene coin_scene(bool flare) {
+  Scene s;
+  s.lights = layout_directions("rings:30:8:10,50:6:20,70:4:30,90:1");
+  s.centre = {190.0, 200.0};
+  s.radius = 110.0;
+  synth::SphereRigOptions rig;
+  rig.width = 560;
+  rig.height = 400;
+  rig.centre_px = s.centre;
+  rig.radius_px = s.radius;
+  rig.background = 0.08;
+  rig.body = 0.02;
+  // A clipped highlight is a core a few pixels across (a 2 degree light: about 4 px here).
+  rig.light_radius_deg = flare ? 2.0 : 1.0;
+  rig.highlight = flare ? 3.0 : 0.9;
+  rig.highlight_supersample = 16;
+  rig.noise_grey = 1.0;
+  const Eigen::Vector2d coin(430.0, 220.0);
+  const std::array<Eigen::Vector2d, 3> glints{{{410.0, 200.0}, {450.0, 240.0}, {430.0, 190.0}}};
+  for (std::size_t i = 0; i < s.lights.size(); ++i) {
+    rig.light_dir = s.lights[i];
+    rig.seed = i + 1;
+    Image img = synth::render_sphere_rig(rig);
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        float& v = img.at(x, y, 0);
+        const Eigen::Vector2d p(x, y);
+        if ((p - coin).norm() <= 70.0) {
+          v = static_cast<float>(0.25 + 0.5 * s.lights[i].z());
+          for (std::size_t g = 0; g < glints.size(); ++g) {
+            if ((i + g) % 3 == 0 && (p - glints[g]).norm() <= 2.5) v = 1.0f;
+          }
+        }
+        // A window reflected near the sphere's rim: in every image.
+        if (x >= 120 && x <= 134 && y >= 150 && y <= 175) v = std::max(v, 0.95f);
+        v = std::min(v, 1.0f);
+      }
+    }
+    if (flare) {
+      const Eigen::Vector3d n = (s.lights[i] + Eigen::Vector3d::UnitZ()).normalized();
+      const Eigen::Vector2d h = s.centre + s.radius * Eigen::Vector2d(n.x(), -n.y());
+      // Bloom: a symmetric glow (sigma 6 px) around the core.
+      for (int y = 0; y < img.height(); ++y) {
+        for (int x = 0; x < img.width(); ++x) {
+          const double d2 = (Eigen::Vector2d(x, y) - h).squaredNorm();
+          if (d2 < 400.0 && (Eigen::Vector2d(x, y) - s.centre).norm() < s.radius) {
+            float& v = img.at(x, y, 0);
+            v = std::min(1.0f, v + static_cast<float>(0.3 * std::exp(-d2 / 72.0)));
+          }
+        }
+      }
+      // A one-sided streak from the core, 40 px long toward the lower right, 1 px wide and
+      // clipped: pulls a plain centroid of the clipped region by several pixels.
+      for (int t = 1; t < 40; ++t) {
+        const int x = static_cast<int>(std::lround(h.x() + 0.8 * t));
+        const int y = static_cast<int>(std::lround(h.y() + 0.6 * t));
+        if (x >= 0 && y >= 0 && x < img.width() && y < img.height() &&
+            (Eigen::Vector2d(x, y) - s.centre).norm() < s.radius - 3) {
+          img.at(x, y, 0) = 1.0f;
+        }
+      }
+    }
+    s.images.push_back(std::move(img));
+    s.names.emplace_back("img" + std::to_string(i) + ".png");
+  }
+  return s;
+}
+
+void expect_accurate(const StackCalibration& r, const Scene& s, const char* label) {
+  ASSERT_EQ(r.rig.spheres.size(), 1u);
+  const Circle& c = r.rig.spheres[0].sphere;
+  double mean = 0.0, max = 0.0;
+  int usable = 0;
+  for (std::size_t i = 0; i < s.lights.size(); ++i) {
+    const RigLight& l = r.rig.lights[i];
+    EXPECT_TRUE(l.found) << label << " light " << i << ": " << l.flag;
+    if (!l.found) continue;
+    ++usable;
+    const double a = angle_deg(l.direction, s.lights[i]);
+    mean += a / static_cast<double>(s.lights.size());
+    max = std::max(max, a);
+  }
+  std::printf("%s: centre off by %.3f px, radius by %.3f%%; lights mean %.3f max %.3f deg (%d)\n",
+              label, (c.centre_px - s.centre).norm(),
+              100.0 * std::abs(c.radius_px - s.radius) / s.radius, mean, max, usable);
+  EXPECT_LE((c.centre_px - s.centre).norm(), 0.5) << label;
+  EXPECT_LE(std::abs(c.radius_px - s.radius), 0.005 * s.radius) << label;
+  EXPECT_LE(mean, 0.2) << label;
+  EXPECT_LE(max, 1.0) << label;
+}
+
+TEST(CalibSphereStack, FindsTheSphereNotTheCoinAndIgnoresTheWindow) {
+  const Scene s = coin_scene(false);
+  const StackCalibration r = calibrate_sphere_stack(s.images, s.names, {});
+  expect_accurate(r, s, "sphere beside a coin");
+  // The coin was considered and refused.
+  bool coin_seen = false;
+  for (const SphereCandidate& c : r.candidates) {
+    if ((c.circle.centre_px - Eigen::Vector2d(430.0, 220.0)).norm() < 15.0) {
+      coin_seen = true;
+      EXPECT_FALSE(c.chosen);
+      EXPECT_LT(c.score, 0.5) << "coin: " << c.note;
+    }
+  }
+  EXPECT_TRUE(coin_seen) << "the coin is round: it should be a candidate";
+}
+
+TEST(CalibSphereStack, ClippedHighlightsWithStreaksLocatedByTheirCore) {
+  const Scene s = coin_scene(true);
+  {
+    StackCalibrationOptions given;
+    given.rig.spheres = {Circle{s.centre, s.radius, {}}};
+    const StackCalibration g = calibrate_sphere_stack(s.images, s.names, given);
+    expect_accurate(g, s, "clipped highlights with flare streaks, circle given");
+  }
+  const StackCalibration r = calibrate_sphere_stack(s.images, s.names, {});
+  expect_accurate(r, s, "clipped highlights with flare streaks");
+  for (const SphereLight& l : r.rig.spheres[0].lights) EXPECT_TRUE(l.saturated);
+}
+
+TEST(CalibSphereStack, NoSphereIsAnErrorListingTheCandidates) {
+  Scene s = coin_scene(false);
+  // Paint the sphere over with the background: only the coin is left.
+  for (Image& img : s.images) {
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - s.centre).norm() <= s.radius + 3) img.at(x, y, 0) = 0.08f;
+      }
+    }
+  }
+  try {
+    (void)calibrate_sphere_stack(s.images, s.names, {});
+    FAIL() << "no sphere: expected an error";
+  } catch (const SphereSearchError& e) {
+    EXPECT_NE(std::string(e.what()).find("candidates"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("--roi"), std::string::npos) << e.what();
+    for (const SphereCandidate& c : e.candidates()) EXPECT_FALSE(c.chosen);
+    // The overlay of the candidates draws on a photo.
+    const Image o = candidates_overlay(s.images[0], e.candidates());
+    EXPECT_EQ(o.width(), s.images[0].width());
+  }
+}
+
+TEST(CalibSphereStack, HintsNarrowTheSearchAndBadHintsAreErrors) {
+  const Scene s = coin_scene(false);
+  StackCalibrationOptions o;
+  o.search.rois = {{60, 70, 260, 260}};
+  const StackCalibration boxed = calibrate_sphere_stack(s.images, s.names, o);
+  expect_accurate(boxed, s, "search box");
+  // A box around the coin only: the coin is refused, nothing written.
+  o.search.rois = {{350, 140, 160, 160}};
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, o), SphereSearchError);
+  // A radius range that excludes the sphere.
+  StackCalibrationOptions r;
+  r.search.min_radius_px = 20.0;
+  r.search.max_radius_px = 40.0;
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, r), SphereSearchError);
+  // A reference photo in room light (here: the sphere and coin lit evenly) adds its rim.
+  test::ScratchDir dir;
+  Image room(560, 400, 1, ColourSpace::kLinear, 0.4f);
+  for (int y = 0; y < room.height(); ++y) {
+    for (int x = 0; x < room.width(); ++x) {
+      if ((Eigen::Vector2d(x, y) - s.centre).norm() <= s.radius) room.at(x, y, 0) = 0.1f;
+    }
+  }
+  write_image(dir / "room.png", room.view());
+  StackCalibrationOptions ref;
+  ref.search.reference = dir / "room.png";
+  expect_accurate(calibrate_sphere_stack(s.images, s.names, ref), s, "reference photo");
+  write_image(dir / "small.png", Image(100, 80, 1, ColourSpace::kLinear, 0.4f).view());
+  ref.search.reference = dir / "small.png";
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, ref), Error);
+  StackCalibrationOptions bad;
+  bad.search.rois = {{2000, 2000, 50, 50}};
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, bad), Error);
+  bad.search.rois.clear();
+  bad.search.min_radius_px = 50.0;
+  bad.search.max_radius_px = 10.0;
+  EXPECT_THROW((void)calibrate_sphere_stack(s.images, s.names, bad), Error);
+}
+
+TEST(CalibSphereStack, OverlayDownscaleKeepsTheLongestSideWithinTheLimit) {
+  Image big(4000, 3000, 3, ColourSpace::kSRGB, 0.5f);
+  double scale = 0.0;
+  const Image small = downscale_for_overlay(big, 1600, &scale);
+  EXPECT_LE(std::max(small.width(), small.height()), 1600);
+  EXPECT_DOUBLE_EQ(scale, 1.0 / 3.0);
+  const Image same = downscale_for_overlay(big, 0, &scale);
+  EXPECT_EQ(same.width(), 4000);
+  EXPECT_DOUBLE_EQ(scale, 1.0);
+}
+
+TEST(CalibSphereStack, LargeSphereCutByTheFrameAndHiddenByItsBase) {
+  // The sphere fills most of the frame: its top 12 px are outside, a base covers its bottom.
+  Scene s;
+  s.lights = layout_directions("rings:30:8:10,50:6:20,70:4:30,90:1");
+  s.centre = {240.3, 190.6};
+  s.radius = 202.0;
+  synth::SphereRigOptions rig;
+  rig.width = 480;
+  rig.height = 400;
+  rig.centre_px = s.centre;
+  rig.radius_px = s.radius;
+  rig.background = 0.1;
+  rig.body = 0.02;
+  rig.highlight_supersample = 16;
+  rig.noise_grey = 1.0;
+  for (std::size_t i = 0; i < s.lights.size(); ++i) {
+    rig.light_dir = s.lights[i];
+    rig.seed = i + 7;
+    Image img = synth::render_sphere_rig(rig);
+    for (int y = 360; y < img.height(); ++y) {
+      for (int x = 170; x < 310; ++x) img.at(x, y, 0) = 0.3f;
+    }
+    s.images.push_back(std::move(img));
+    s.names.emplace_back("big" + std::to_string(i) + ".png");
+  }
+  const StackCalibration r = calibrate_sphere_stack(s.images, s.names, {});
+  expect_accurate(r, s, "large sphere, cut by the frame, on a base");
+}
+
+TEST(CalibSphereStack, TwoSpheresWithACoinBetweenThem) {
+  // Two black glossy spheres (radius 110 and 60 px) left and top right, the coin between.
+  Scene left = coin_scene(false);
+  synth::SphereRigOptions rig;
+  rig.width = 560;
+  rig.height = 400;
+  rig.centre_px = {490.0, 75.0};
+  rig.radius_px = 60.0;
+  rig.background = 0.08;
+  rig.body = 0.02;
+  rig.light_radius_deg = 1.0;
+  rig.highlight_supersample = 16;
+  rig.noise_grey = 1.0;
+  std::vector<Image> images;
+  for (std::size_t i = 0; i < left.images.size(); ++i) {
+    rig.light_dir = left.lights[i];
+    rig.seed = 100 + i;
+    const Image right = synth::render_sphere_rig(rig);
+    Image img = left.images[i];
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - rig.centre_px).norm() <= rig.radius_px + 2.0) {
+          img.at(x, y, 0) = right.at(x, y, 0);
+        }
+      }
+    }
+    images.push_back(std::move(img));
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  const StackCalibration r = calibrate_sphere_stack(images, left.names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  EXPECT_LE((r.rig.spheres[0].sphere.centre_px - left.centre).norm(), 0.5);
+  EXPECT_LE((r.rig.spheres[1].sphere.centre_px - rig.centre_px).norm(), 0.5);
+  EXPECT_LE(std::abs(r.rig.spheres[1].sphere.radius_px - rig.radius_px), 0.005 * rig.radius_px);
+  double mean = 0.0, max = 0.0;
+  for (std::size_t i = 0; i < left.lights.size(); ++i) {
+    EXPECT_TRUE(r.rig.lights[i].found) << r.rig.lights[i].flag;
+    const double a = angle_deg(r.rig.lights[i].direction, left.lights[i]);
+    mean += a / static_cast<double>(left.lights.size());
+    max = std::max(max, a);
+  }
+  std::printf("two spheres and a coin: lights mean %.3f max %.3f deg\n", mean, max);
+  EXPECT_LE(mean, 0.2);
+  EXPECT_LE(max, 1.0);
+}
+
+TEST(CalibSphereStack, SameResultWithOneOrTwoThreads) {
+  const Scene s = coin_scene(true);
+  StackCalibration one, two;
+  {
+    const ThreadLimit limit(1);
+    one = calibrate_sphere_stack(s.images, s.names, {});
+  }
+  {
+    const ThreadLimit limit(2);
+    two = calibrate_sphere_stack(s.images, s.names, {});
+  }
+  EXPECT_EQ(one.to_json(), two.to_json());
+}
+
+TEST(CalibSphereStack, CommandRefusesWeakEvidenceAndDrawsTheCandidates) {
+  test::ScratchDir dir;
+  Scene s = coin_scene(false);
+  std::vector<std::string> args{"calibrate", "sphere"};
+  for (std::size_t i = 0; i < s.images.size(); ++i) {
+    Image& img = s.images[i];
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - s.centre).norm() <= s.radius + 3) img.at(x, y, 0) = 0.08f;
+      }
+    }
+    const fs::path p = dir / s.names[i];
+    write_image(p, img.view());
+    args.push_back(p.string());
+  }
+  auto run = args;
+  run.insert(run.end(), {"-o", (dir / "lights.lp").string()});
+  const auto r = test::run_ptmkit(run);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("candidates"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "lights.lp"));
+  EXPECT_TRUE(fs::exists(dir / "lights.candidates.png"));
+  // Malformed hints are errors too, with no output.
+  for (const std::vector<std::string>& extra : {std::vector<std::string>{"--roi", "1,2,3"},
+                                                {"--roi", "10,10,0,5"},
+                                                {"--radius-range", "40"},
+                                                {"--radius-range", "50,10"}}) {
+    auto bad = args;
+    bad.insert(bad.end(), extra.begin(), extra.end());
+    bad.insert(bad.end(), {"-o", (dir / "bad.lp").string()});
+    const auto b = test::run_ptmkit(bad);
+    EXPECT_EQ(b.exit_code, 1) << extra[0] << " " << extra[1];
+    EXPECT_NE(b.err.find(extra[0]), std::string::npos) << b.err;
+    EXPECT_FALSE(fs::exists(dir / "bad.lp"));
+  }
+}
+
+// The photographic render (synth/photo.h): two black glossy spheres on cups beside the
+// object, a coin, a dark room with windows and lamps reflected, flare, bloom, vignetting and
+// noise all on; 8 of the preset's lights to keep the test short.
+TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-dome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth& truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("photo" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = truth.spheres[k].outline;
+    std::printf("photo-dome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
+                (c.centre_px - t.centre_px).norm(),
+                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+    // Never the coin.
+    EXPECT_GT((c.centre_px - truth.distractor_centre_px).norm(), truth.distractor_radius_px);
+  }
+  double mean = 0.0, max = 0.0;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    EXPECT_TRUE(r.rig.lights[i].found) << i << ": " << r.rig.lights[i].flag;
+    const double a = angle_deg(r.rig.lights[i].direction, truth.light_dirs[i]);
+    mean += a / static_cast<double>(truth.light_dirs.size());
+    max = std::max(max, a);
+  }
+  // Measured, not yet at the 0.2 / 1 degree target on these renders (docs/CALIBRATION.md);
+  // bounded here at what a wrong highlight or circle would exceed many times over.
+  std::printf("photo-dome lights: mean %.3f max %.3f deg\n", mean, max);
+  EXPECT_LE(max, 1.0);
+}
+
+// Chrome spheres with a glazed dish beside them: the dish's glint moves with the light too,
+// but does not reflect the lights as the spheres do, so it is refused.
+TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-chrome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth& truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("chrome" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = truth.spheres[k].outline;
+    std::printf("photo-chrome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
+                (c.centre_px - t.centre_px).norm(),
+                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+  }
+  for (const SphereCandidate& c : r.candidates) {
+    if ((c.circle.centre_px - truth.distractor_centre_px).norm() <
+        0.5 * truth.distractor_radius_px) {
+      EXPECT_FALSE(c.chosen) << "the dish was taken: " << c.note;
+    }
+  }
+}
+
+std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {
+  std::ifstream lf(root / "lights.txt");
+  int n = 0;
+  lf >> n;
+  std::vector<Eigen::Vector3d> v(static_cast<std::size_t>(n));
+  for (auto& d : v) lf >> d.x() >> d.y() >> d.z();
+  return v;
+}
+
+TEST(CalibSphereStack, RealChromeSphereFoundWithoutAnyHint) {
+  const auto root = test::shared_data("uw-psm");
+  if (!root) GTEST_SKIP() << "../shared/data/uw-psm is absent";
+  const auto published = published_lights(*root);
+  std::vector<fs::path> files;
+  for (std::size_t i = 0; i < published.size(); ++i) {
+    files.push_back(*root / "chrome" / ("chrome." + std::to_string(i) + ".png"));
+  }
+  auto measure = [&](const StackCalibration& r, const char* label) {
+    double mean = 0.0, max = 0.0;
+    for (std::size_t i = 0; i < published.size(); ++i) {
+      EXPECT_TRUE(r.rig.lights[i].found) << label << " " << i << ": " << r.rig.lights[i].flag;
+      const double a = angle_deg(r.rig.lights[i].direction, published[i]);
+      mean += a / static_cast<double>(published.size());
+      max = std::max(max, a);
+    }
+    const Circle& c = r.rig.spheres[0].sphere;
+    std::printf(
+        "uw-psm chrome, %s: circle (%.2f, %.2f) r %.2f px; vs published: mean %.2f max %.2f deg\n",
+        label, c.centre_px.x(), c.centre_px.y(), c.radius_px, mean, max);
+    return mean;
+  };
+  const StackCalibration found = calibrate_sphere_stack(files, {});
+  EXPECT_EQ(found.rig.usable(), static_cast<int>(published.size()));
+  const double mean_found = measure(found, "no hint");
+  StackCalibrationOptions masked;
+  masked.rig.spheres = {circle_from_mask(read_image(*root / "chrome" / "chrome.mask.png").view())};
+  const StackCalibration with_mask = calibrate_sphere_stack(files, masked);
+  const double mean_masked = measure(with_mask, "mask");
+  // The circle found agrees with the mask's to a pixel or two (its lower rim is black on
+  // black), and the lights with the published ones as closely as with the mask.
+  EXPECT_LE(
+      (found.rig.spheres[0].sphere.centre_px - with_mask.rig.spheres[0].sphere.centre_px).norm(),
+      2.0);
+  EXPECT_LE(mean_found, mean_masked + 0.25);
+}
+
+}  // namespace
+}  // namespace ptmkit::calib
+
+namespace ptmkit::calib {
+namespace {
+
+TEST(CalibSphereStack, CommandCalibratesTheRealChromeSphereWithoutHints) {
+  const auto root = test::shared_data("uw-psm");
+  if (!root) GTEST_SKIP() << "../shared/data/uw-psm is absent";
+  test::ScratchDir dir;
+  std::vector<std::string> args{"calibrate", "sphere"};
+  for (int i = 0; i < 12; ++i) {
+    args.push_back((*root / "chrome" / ("chrome." + std::to_string(i) + ".png")).string());
+  }
+  args.insert(args.end(),
+              {"-o", (dir / "chrome.lp").string(), "--report", (dir / "chrome.json").string(),
+               "--overlays", (dir / "ov").string(), "--overlay-max-side", "256"});
+  const auto r = test::run_ptmkit(args);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("found, score"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("12 of 12 lights usable"), std::string::npos) << r.out;
+  EXPECT_EQ(read_lp(dir / "chrome.lp").size(), 12u);
+  const auto overlays = test::list_files(dir / "ov");
+  ASSERT_EQ(overlays.size(), 12u);
+  const ImageInfo info = probe_image(dir / "ov" / overlays.front());
+  EXPECT_LE(std::max(info.width, info.height), 256);
+}
+
+}  // namespace
+}  // namespace ptmkit::calib
