@@ -21,7 +21,7 @@ struct SolverName {
   Solver solver;
   const char* name;
 };
-constexpr std::array<SolverName, 13> kSolverNames = {{
+constexpr std::array<SolverName, 14> kSolverNames = {{
     {Solver::kLS, "ls"},
     {Solver::kQR, "qr"},
     {Solver::kSVD, "svd"},
@@ -31,6 +31,7 @@ constexpr std::array<SolverName, 13> kSolverNames = {{
     {Solver::kTrim, "trim"},
     {Solver::kSign, "sign"},
     {Solver::kLambert, "lambert"},
+    {Solver::kQTrim, "qtrim"},
     {Solver::kCeresHuber, "ceres-huber"},
     {Solver::kCeresCauchy, "ceres-cauchy"},
     {Solver::kCeresTukey, "ceres-tukey"},
@@ -132,6 +133,9 @@ std::string RobustOptions::validate() const {
   if (!(saturation_level > 0.0)) return "saturation_level must be > 0 (+inf disables it)";
   if (max_iterations < 1 || ceres_max_iterations < 1) return "iterations must be >= 1";
   if (min_inliers < kPtmTerms) return "min_inliers must be at least 6";
+  if (!(dark_quantile >= 0.0 && bright_quantile >= 0.0 && dark_quantile + bright_quantile < 0.9)) {
+    return "dark_quantile and bright_quantile must be >= 0 with a sum below 0.9";
+  }
   if (!(readmit_k >= 0.0)) return "readmit_k must be >= 0 (0 = off)";
   if (!(keep_within >= 0.0) || !std::isfinite(keep_within)) {
     return "keep_within must be finite and >= 0 (0 = off)";
@@ -159,6 +163,7 @@ struct TexelSolver::Impl {
   std::vector<SampleLabel> trial;
   std::vector<double> trial_weights;
   std::vector<std::uint8_t> hard;  // label fixed by trimming
+  std::vector<int> order;          // quantile_trim's ranks
   // Cached factorisation of the last weighted system.
   std::vector<double> llt_weights;
   Eigen::LLT<Mat6> llt;
@@ -349,6 +354,49 @@ struct TexelSolver::Impl {
       if (opt.readmit_k > 0.0 && !out.fallback) readmit(value, saturated, weights, labels, c);
       fill_ok = solver == Solver::kLambert && opt.fill_rejected && !out.fallback &&
                 lambert_explains(value, weights, *c);
+    }
+    for (int i = 0; i < n; ++i) {
+      out.shadows += labels[i] == SampleLabel::kShadow ? 1 : 0;
+      out.highlights += labels[i] == SampleLabel::kHighlight ? 1 : 0;
+    }
+    return out;
+  }
+
+  // Quantile trimming: clipped samples are highlights; of the rest, the darkest
+  // dark_quantile of all samples are shadows and the brightest bright_quantile highlights
+  // (ranks by value, NaN last, ties by index: a strict order, so the result does not depend
+  // on the sort).
+  void quantile_trim(const double* value, const std::uint8_t* saturated, SampleLabel* labels) {
+    const int n_dark = static_cast<int>(std::floor(opt.dark_quantile * n));
+    const int n_bright = static_cast<int>(std::floor(opt.bright_quantile * n));
+    order.resize(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) order[static_cast<std::size_t>(i)] = i;
+    std::sort(order.begin(), order.end(), [value](int a, int b) {
+      const bool na = std::isnan(value[a]), nb = std::isnan(value[b]);
+      if (na != nb) return nb;
+      if (!na && value[a] != value[b]) return value[a] < value[b];
+      return a < b;
+    });
+    for (int r = 0; r < n; ++r) {
+      const int i = order[static_cast<std::size_t>(r)];
+      labels[i] = saturated[i] != 0   ? SampleLabel::kHighlight
+                  : r < n_dark        ? SampleLabel::kShadow
+                  : r >= n - n_bright ? SampleLabel::kHighlight
+                                      : SampleLabel::kInlier;
+    }
+  }
+
+  TexelOutcome solve_quantile(const double* value, const std::uint8_t* saturated, double* weights,
+                              SampleLabel* labels, Vec6* c) {
+    TexelOutcome out;
+    quantile_trim(value, saturated, labels);
+    to_weights(labels, n, weights);
+    if (!weighted(value, weights, c)) {
+      // Too few or degenerate kept samples (most clipped): plain least squares.
+      std::fill(labels, labels + n, SampleLabel::kInlier);
+      std::fill(weights, weights + n, 1.0);
+      *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
+      out.fallback = true;
     }
     for (int i = 0; i < n; ++i) {
       out.shadows += labels[i] == SampleLabel::kShadow ? 1 : 0;
@@ -674,6 +722,9 @@ TexelOutcome TexelSolver::solve(const double* value, const std::uint8_t* saturat
     case Solver::kSign:
     case Solver::kLambert:
       out = m.solve_trim_sign(value, saturated, weights, labels, &c);
+      break;
+    case Solver::kQTrim:
+      out = m.solve_quantile(value, saturated, weights, labels, &c);
       break;
     case Solver::kIrlsHuber:
     case Solver::kIrlsTukey:

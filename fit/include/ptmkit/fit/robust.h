@@ -26,6 +26,8 @@
 //                       with an ambient term, value ~ l . g + a (4 unknowns, photometric
 //                       stereo), iterated; then the polynomial on the inliers. Knows what the
 //                       polynomial cannot represent: its own misfit is not taken for an outlier.
+//   qtrim               drop the darkest quarter and the brightest tenth of the texel's samples
+//                       (RobustOptions::dark_quantile, bright_quantile) and clipped ones, refit.
 //   ceres-huber/cauchy/tukey
 //                       Ceres, one residual block per sample, robust loss of width k * scale,
 //                       started from least squares; the loss weights then fit all channels.
@@ -52,13 +54,14 @@ enum class Solver {
   kTrim,
   kSign,
   kLambert,
+  kQTrim,
   kCeresHuber,
   kCeresCauchy,
   kCeresTukey,
   kRobust,
 };
-// The --solver names: ls, qr, svd, ridge, irls-huber, irls-tukey, trim, sign, lambert, ceres-huber,
-// ceres-cauchy, ceres-tukey, robust.
+// The --solver names: ls, qr, svd, ridge, irls-huber, irls-tukey, trim, sign, lambert, qtrim,
+// ceres-huber, ceres-cauchy, ceres-tukey, robust.
 [[nodiscard]] std::string_view to_string(Solver solver);
 // Throws ptmkit::Error listing the known names for an unknown one.
 [[nodiscard]] Solver parse_solver(std::string_view name);
@@ -98,6 +101,12 @@ struct RobustOptions {
   // anyway (measured on the synth presets, docs/SOLVERS.md).
   double shadow_k = 3.0;
   double highlight_k = 2.0;
+  // qtrim: per texel, the darkest dark_quantile of the samples (by labelling value) are
+  // shadows and the brightest bright_quantile highlights, whatever their level (clipped
+  // samples are highlights besides). The plain trimming that robust rules are measured
+  // against (docs/SOLVERS.md, "Broad unclipped lobes").
+  double dark_quantile = 0.25;
+  double bright_quantile = 0.10;
   // Iterations of IRLS / the sign rule (each a 6 x 6 solve); stops early when labels settle.
   int max_iterations = 6;
   // Fewest inliers a texel keeps: below that the previous labelling stands (a polynomial on
