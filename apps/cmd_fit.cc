@@ -3,8 +3,6 @@
 #include <filesystem>
 #include <memory>
 
-#include <nlohmann/json.hpp>
-
 #include "commands.h"
 #include "progress.h"
 #include "ptmkit/calib/dome.h"
@@ -13,9 +11,8 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/plane.h"
-#include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/fit.h"
-#include "ptmkit/fit/model_select.h"
+#include "ptmkit/fit/plan.h"
 #include "ptmkit/texture/ptm.h"
 #include "ptmkit/texture/rti.h"
 
@@ -38,38 +35,12 @@ struct FitArgs {
   std::string albedo;
   std::string labels;
   fit::FitOptions options;
-  // --model: ptm (default), auto, hsh2, hsh3, hsh4 (fit/model_select.h, fit/basis.h).
+  // --model: ptm (default), auto, hsh2, hsh3, hsh4 (fit/plan.h).
   std::string model = "ptm";
   bool format_given = false;
   std::string lights_json;  // near lights: positions (--lights-json)
   std::string plane;        // near lights: sample plane (--plane)
 };
-
-// Near lights: the positions of a lights JSON (calib's format: `ptmkit calibrate dome
-// --radius`, `ptmkit synth --dome-radius`) onto the .lp's lights, matched in order; the
-// image names must agree.
-void attach_light_positions(LightSet* lights, const std::string& json_path) {
-  const LightSet json = calib::read_dome_json(json_path);
-  if (json.size() != lights->size()) {
-    throw Error(json_path + ": " + std::to_string(json.size()) + " lights but the light file has " +
-                std::to_string(lights->size()));
-  }
-  for (std::size_t i = 0; i < json.size(); ++i) {
-    const Light& j = json.lights[i];
-    Light& l = lights->lights[i];
-    if (j.image.filename() != l.image.filename()) {
-      throw Error(json_path + ": light " + std::to_string(i + 1) + " is " +
-                  j.image.filename().string() + " but the light file's is " +
-                  l.image.filename().string());
-    }
-    if (!j.position_mm) {
-      throw Error(json_path + ": light " + std::to_string(i + 1) +
-                  " has no position_mm (directions only describe distant lights; give "
-                  "\"radius_mm\" or each light's \"position_mm\")");
-    }
-    l.position_mm = j.position_mm;
-  }
-}
 
 // Checks an output map's extension before the fit runs (no work lost on a typo).
 void check_map_path(const std::string& path, const char* flag, bool png_ok) {
@@ -79,95 +50,60 @@ void check_map_path(const std::string& path, const char* flag, bool png_ok) {
   throw Error(path + ": " + flag + " must be an .exr file" + (png_ok ? " or a .png file" : ""));
 }
 
-// --model other than ptm: chooses the model (auto) and fits an HSH basis into an .rti. Returns
-// false when the PTM is to be fitted (auto chose it; options->model is then its colour model).
-bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* model_json) {
-  const fs::path out_path(args.output);
-  const LightSet lights = read_lp(args.lights);
-  fit::Basis basis = fit::Basis::kPtm;
-  ColourModel colour = options->model;
-  if (args.model == "auto") {
-    fit::ModelSelectOptions sel;
-    sel.design = options->design;
-    if (args.format_given) sel.colours = {options->model};
-    const fit::ModelReport report = fit::select_model(lights, sel);
-    std::printf("model selection: %d texels (every %d px), %d folds over %d lights, %.2f s\n%s",
-                report.texels, report.stride, report.folds, report.lights, report.seconds,
-                report.table().c_str());
-    *model_json = report.to_json();
-    basis = report.choice().basis;
-    colour = report.choice().colour;
+// The coefficient file's writer for the planned format.
+struct CoefficientWriter {
+  std::unique_ptr<texture::PtmStreamWriter> ptm;
+  std::unique_ptr<texture::RtiWriter> rti;
+  CoefficientSink& sink() { return ptm ? static_cast<CoefficientSink&>(*ptm) : *rti; }
+  [[nodiscard]] fit::WriteSummary summary() const {
+    fit::WriteSummary w;
+    if (ptm) {
+      const texture::PtmWriteReport& r = ptm->report();
+      w.file_bytes = r.file_bytes;
+      w.max_coeff_error = r.max_coeff_error;
+      w.rms_coeff_error = r.rms_coeff_error;
+      w.relit_mean_abs_grey = r.relit_mean_abs_grey;
+      w.relit_max_abs_grey = r.relit_max_abs_grey;
+      w.relit_psnr_db = r.relit_psnr_db;
+    } else {
+      const texture::RtiWriteReport& r = rti->report();
+      w.file_bytes = r.file_bytes;
+      w.max_coeff_error = r.max_coeff_error;
+      w.rms_coeff_error = r.rms_coeff_error;
+    }
+    return w;
+  }
+};
+
+CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& path) {
+  CoefficientWriter w;
+  if (format == fit::CoefficientFormat::kPtm) {
+    w.ptm = std::make_unique<texture::PtmStreamWriter>(path);
   } else {
-    basis = fit::parse_basis(args.model);
+    w.rti = std::make_unique<texture::RtiWriter>(path);
   }
-  const char* want = basis == fit::Basis::kPtm ? ".ptm" : ".rti";
-  if (out_path.extension() != want) {
-    throw Error(out_path.string() + ": the " + std::string(fit::to_string(basis)) +
-                " model is written as a " + want + " file: use -o NAME" + want);
-  }
-  if (basis == fit::Basis::kPtm) {
-    options->model = colour;
-    return false;
-  }
-  if (!fit::is_shared_solver(fit::parse_solver(args.solver))) {
-    throw Error("--solver " + args.solver + " is only available with the ptm model");
-  }
-  if (!args.residual_map.empty() || !args.outlier_map.empty() || !args.normals.empty() ||
-      !args.albedo.empty() || !args.labels.empty()) {
-    throw Error(
-        "--residual-map, --outlier-map, --normals, --albedo and --labels go with the "
-        "ptm model");
-  }
-  fit::BasisFitOptions bo;
-  bo.basis = basis;
-  bo.model = colour;
-  bo.design = options->design;
-  bo.threads = options->threads;
-  bo.band_rows = options->band_rows;
-  bo.progress = make_progress("fit");
-  fit::BasisMap map;
-  const fit::BasisFitReport report = fit::fit_basis_capture(lights, bo, &map);
-  texture::RtiMap rti(map.width, map.height, map.terms(), map.colour_space);
-  rti.coeffs = std::move(map.coeffs);
-  const texture::RtiWriteReport written = texture::write_rti(out_path, rti);
-  if (!args.report.empty()) {
-    nlohmann::json j = nlohmann::json::parse(report.to_json());
-    j["input"] = fs::absolute(args.lights).lexically_normal().string();
-    j["output"] = fs::absolute(out_path).lexically_normal().string();
-    j["quantisation"] = {{"file_bytes", written.file_bytes},
-                         {"max_coeff_error", written.max_coeff_error},
-                         {"rms_coeff_error", written.rms_coeff_error}};
-    if (!model_json->empty()) j["model_selection"] = nlohmann::json::parse(*model_json);
-    write_file_atomic(args.report, j.dump(2) + "\n");
-  }
-  std::printf(
-      "fit: %d lights, %dx%d, %s %s (%d terms), cond(A) %.3g, residual rms %.2f grey, "
-      "%.3f s\nwrote %s (%zu bytes)\n",
-      report.lights, report.width, report.height, std::string(fit::to_string(basis)).c_str(),
-      std::string(to_string(report.model)).c_str(), fit::basis_terms(basis),
-      report.condition_number, report.residual_rms_grey, report.total_seconds,
-      out_path.string().c_str(), written.file_bytes);
-  return true;
+  return w;
 }
 
 void run_fit(const FitArgs& args) {
-  fit::FitOptions options = args.options;
-  options.model = parse_colour_model(args.format);
-  if (args.precision == "double") {
-    options.precision = fit::Precision::kDouble;
-  } else if (args.precision != "float") {
-    throw Error("--precision must be float or double, got '" + args.precision + "'");
-  }
-  std::string model_json;  // --model auto's evidence
-  if (args.model != "ptm" && (!args.plane.empty() || !args.lights_json.empty())) {
-    throw Error("--plane and --lights-json (near lights) work with --model ptm only so far");
-  }
-  if (args.model != "ptm" && run_model_fit(args, &options, &model_json)) return;
-  const fs::path out_path(args.output);
-  if (out_path.extension() != ".ptm") {
-    throw Error(out_path.string() + ": the output must be a .ptm file");
-  }
-  options.solver = fit::parse_solver(args.solver);
+  // Flags -> request.
+  fit::FitRequest request;
+  request.options = args.options;
+  request.options.model = parse_colour_model(args.format);
+  request.options.precision =
+      args.precision == "double" ? fit::Precision::kDouble : fit::Precision::kFloat;
+  request.options.solver = fit::parse_solver(args.solver);
+  request.options.progress = make_progress("fit");
+  request.model = fit::parse_model_request(args.model);
+  request.colour_given = args.format_given;
+  request.output = args.output;
+  fit::FitOutputs maps;
+  maps.want_residual_map = !args.residual_map.empty();
+  maps.want_outlier_counts = !args.outlier_map.empty();
+  maps.want_normals = !args.normals.empty() || !args.albedo.empty();
+  maps.want_labels = !args.labels.empty();
+  request.wants_maps =
+      maps.want_residual_map || maps.want_outlier_counts || maps.want_normals || maps.want_labels;
   check_map_path(args.residual_map, "--residual-map", false);
   check_map_path(args.outlier_map, "--outlier-map", false);
   check_map_path(args.normals, "--normals", true);
@@ -175,78 +111,49 @@ void run_fit(const FitArgs& args) {
   if (!args.labels.empty() && fs::exists(args.labels) && !fs::is_directory(args.labels)) {
     throw Error(args.labels + ": --labels must be a folder");
   }
-  fit::FitOutputs outputs;
-  outputs.want_residual_map = !args.residual_map.empty();
-  outputs.want_outlier_counts = !args.outlier_map.empty();
-  outputs.want_normals = !args.normals.empty() || !args.albedo.empty();
-  outputs.want_labels = !args.labels.empty();
-  if (outputs.want_residual_map || outputs.want_outlier_counts || outputs.want_normals ||
-      outputs.want_labels) {
-    options.outputs = &outputs;
-  }
-  options.progress = make_progress("fit");
   LightSet lights = read_lp(args.lights);
-  if (!args.lights_json.empty()) attach_light_positions(&lights, args.lights_json);
-  if (!args.plane.empty()) options.near.plane = read_plane_json(args.plane);
-  texture::PtmStreamWriter writer(out_path);
-  const fit::FitReport report = fit::fit_capture(lights, options, writer);
+  if (!args.lights_json.empty()) {
+    fit::attach_light_positions(&lights, calib::read_dome_json(args.lights_json), args.lights_json);
+  }
+  if (!args.plane.empty()) request.options.near.plane = read_plane_json(args.plane);
+
+  // One library call each: plan (model, format, what goes together), fit.
+  const fit::FitPlan plan = fit::plan_fit(lights, request);
+  if (plan.selection) {
+    std::printf("model selection: %d texels (every %d px), %d folds over %d lights, %.2f s\n%s",
+                plan.selection->texels, plan.selection->stride, plan.selection->folds,
+                plan.selection->lights, plan.selection->seconds, plan.selection->table().c_str());
+  }
+  // Every output reaches its path together with the others once all are written (the
+  // command's OutputTransaction, apps/main.cc): a failure anywhere leaves none of them.
+  const fs::path out_path(args.output);
+  CoefficientWriter writer = make_writer(plan.format, out_path);
+  fit::FitRunReport run;
+  run.fit =
+      fit::fit_capture(lights, plan.options, writer.sink(), request.wants_maps ? &maps : nullptr);
+  run.selection = plan.selection;
+  run.input = args.lights;
+  run.output = out_path;
+  run.written = writer.summary();
+
   const ImageWriteOptions exr{PixelFormat::kF32};
-  if (outputs.want_residual_map) write_image(args.residual_map, outputs.residual_map.view(), exr);
-  if (outputs.want_outlier_counts) {
-    write_image(args.outlier_map, outputs.outlier_counts.view(), exr);
+  if (maps.want_residual_map) {
+    write_image(args.residual_map, maps.residual_map.view(), exr);
+  }
+  if (maps.want_outlier_counts) {
+    write_image(args.outlier_map, maps.outlier_counts.view(), exr);
   }
   if (!args.albedo.empty()) {
     const bool png = fs::path(args.albedo).extension() == ".png";
-    write_image(args.albedo, outputs.albedo.view(),
+    write_image(args.albedo, maps.albedo.view(),
                 ImageWriteOptions{png ? PixelFormat::kU16 : PixelFormat::kF32});
   }
-  if (outputs.want_labels) {
-    fit::write_label_images(args.labels, outputs, lights, report.width, report.height);
+  if (maps.want_labels) {
+    fit::write_label_images(args.labels, maps, lights, run.fit.width, run.fit.height);
   }
-  if (!args.normals.empty()) write_normal_map(args.normals, outputs.normals.view());
-  const texture::PtmWriteReport& ptm = writer.report();
-
-  if (!args.report.empty()) {
-    nlohmann::json j = nlohmann::json::parse(report.to_json());
-    j["input"] = fs::absolute(args.lights).lexically_normal().string();
-    j["output"] = fs::absolute(out_path).lexically_normal().string();
-    if (!model_json.empty()) j["model_selection"] = nlohmann::json::parse(model_json);
-    j["quantisation"] = {
-        {"file_bytes", ptm.file_bytes},
-        {"max_coeff_error", ptm.max_coeff_error},
-        {"rms_coeff_error", ptm.rms_coeff_error},
-        {"relit_mean_abs_grey", ptm.relit_mean_abs_grey},
-        {"relit_max_abs_grey", ptm.relit_max_abs_grey},
-        {"relit_psnr_db", std::isfinite(ptm.relit_psnr_db) ? nlohmann::json(ptm.relit_psnr_db)
-                                                           : nlohmann::json("inf")}};
-    write_file_atomic(args.report, j.dump(2) + "\n");
-  }
-  std::printf(
-      "fit: %d lights, %dx%d, %s, cond(A) %.3g, residual rms %.2f grey (p99 %.2f), %.3f s "
-      "(%.2f Mtexel/s, %d threads)\n",
-      report.lights, report.width, report.height, std::string(to_string(report.model)).c_str(),
-      report.design.condition_number, report.residuals.rms_grey, report.residuals.p99_abs_grey,
-      report.total_seconds, report.texels_per_second() / 1e6, report.threads);
-  if (report.light_model.model == "near") {
-    std::printf(
-        "near lights: per-texel directions (spread up to %.2f deg), fall-off %.3f..%.3f%s\n",
-        report.light_model.max_spread_deg, report.light_model.min_falloff,
-        report.light_model.max_falloff,
-        report.light_model.falloff_corrected ? " corrected" : " not corrected");
-  } else if (!report.light_model.note.empty()) {
-    std::printf("%s\n", report.light_model.note.c_str());
-  }
-  if (!fit::is_shared_solver(report.solver)) {
-    const double total = std::max<double>(1.0, static_cast<double>(report.outliers.samples));
-    std::printf("solver %s: %.2f%% samples shadow, %.2f%% highlight, %llu fallback texels\n",
-                std::string(fit::to_string(report.solver)).c_str(),
-                100.0 * static_cast<double>(report.outliers.shadows) / total,
-                100.0 * static_cast<double>(report.outliers.highlights) / total,
-                static_cast<unsigned long long>(report.outliers.fallback_texels));
-  }
-  std::printf("wrote %s (%zu bytes; quantisation: relit mean %.3f, max %.3f grey levels)\n",
-              out_path.string().c_str(), ptm.file_bytes, ptm.relit_mean_abs_grey,
-              ptm.relit_max_abs_grey);
+  if (!args.normals.empty()) write_normal_map(args.normals, maps.normals.view());
+  if (!args.report.empty()) write_file_atomic(args.report, run.to_json());
+  std::printf("%s", run.brief().c_str());
 }
 
 }  // namespace

@@ -101,11 +101,11 @@ void run_relight(const RelightArgs& args) {
         throw Error(args.input + ": --integer needs a polynomial texture (it is " + tex.format +
                     ")");
       }
-      const texture::RtiMap& rti = tex.hsh;
+      const CoefficientMap& rti = tex.hsh;
       const Image image = texture::relight(rti, dir, relight_options);
       write_image(args.output, image.view(), write);
       std::printf("relit %s (%d x %d, HSH %d terms) from (%.4f, %.4f, %.4f): wrote %s\n",
-                  args.input.c_str(), rti.width, rti.height, rti.terms, dir.x(), dir.y(), dir.z(),
+                  args.input.c_str(), rti.width, rti.height, rti.terms(), dir.x(), dir.y(), dir.z(),
                   args.output.c_str());
       return;
     }

@@ -378,7 +378,7 @@ TEST(PtmScales, IntegerScalesAreWholeAndReachBothEnds) {
 
 TEST(RtiLineEnds, CrlfWrittenAndBothRead) {
   ScratchDir dir;
-  RtiMap m(5, 3, 9);
+  CoefficientMap m({5, 3, Basis::kHsh3, ColourModel::kRGB, ColourSpace::kSRGB});
   std::mt19937 rng(7);
   for (float& v : m.coeffs) v = static_cast<float>(rng() % 1000) / 1000.0f - 0.3f;
   write_rti(dir / "crlf.rti", m);
@@ -569,7 +569,7 @@ TEST(WebFolder, LrgbIsColourTimesLuminance) {
   EXPECT_LE(worst * 255.0, 0.01);
 }
 
-TEST(WebFolder, HshFolderReadsAsAnRtiMapAndConvertsToRti) {
+TEST(WebFolder, HshFolderReadsAsAnHshMapAndConvertsToRti) {
   ScratchDir dir;
   const int w = 18, h = 10;
   const std::vector<Image> planes = smooth_planes(9, w, h, test::test_seed());
@@ -577,20 +577,20 @@ TEST(WebFolder, HshFolderReadsAsAnRtiMapAndConvertsToRti) {
   write_web_folder(dir / "hsh", "hsh", "rgb", planes, scale, bias, false);
   const WebTexture t = read_web_folder(dir / "hsh");
   ASSERT_TRUE(t.is_hsh);
-  ASSERT_EQ(t.hsh.terms, 9);
+  ASSERT_EQ(t.hsh.terms(), 9);
   std::vector<Image> decoded;
   for (int j = 0; j < 9; ++j)
     decoded.push_back(read_image(dir / "hsh" / ("plane_" + std::to_string(j) + ".jpg")));
   for (int c = 0; c < 3; ++c) {
     for (int k = 0; k < 9; ++k) {
       const double expect = (decoded[static_cast<std::size_t>(k)].at(4, 7, c) - 0.5) * 0.8;
-      EXPECT_NEAR(t.hsh.texel(4, 7)[c * 9 + k], expect, 1e-5);
+      EXPECT_NEAR(t.hsh.texel_coeffs(4, 7)[c * 9 + k], expect, 1e-5);
     }
   }
   ConvertOptions o;
   const ConvertReport r = convert_to_rti(dir / "hsh", dir / "out.rti", o);
   EXPECT_EQ(r.from, "web folder hsh rgb image");
-  const RtiMap back = read_rti(dir / "out.rti");
+  const CoefficientMap back = read_rti(dir / "out.rti");
   double worst = 0;
   for (std::size_t i = 0; i < back.coeffs.size(); ++i) {
     worst = std::max(worst, static_cast<double>(std::abs(back.coeffs[i] - t.hsh.coeffs[i])));

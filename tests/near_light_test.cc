@@ -245,7 +245,7 @@ TEST(NearLightFit, ReportsTheModelSpreadAndFalloff) {
   CoefficientMap map;
   CoefficientMapSink sink(&map);
   const FitReport r = fit_images(c.images, c.lights, fo, sink);
-  EXPECT_EQ(r.light_model.model, "near");
+  EXPECT_EQ(r.light_model.model, fit::LightModel::kNear);
   EXPECT_TRUE(r.light_model.falloff_corrected);
   EXPECT_EQ(r.light_model.singular_texels, 0u);
   // The spread of the overhead light across a 94.5 mm field at 250 mm: atan(47.25 sqrt 2 /
@@ -272,7 +272,7 @@ TEST(NearLightFit, PositionsWithoutAPlaneKeepTheDistantPathBitForBit) {
     (void)fit_images(c.images, c.dirs, {}, sink);
   }
   EXPECT_TRUE(same_bits(with_positions.coeffs, dirs_only.coeffs));
-  EXPECT_EQ(r.light_model.model, "distant");
+  EXPECT_EQ(r.light_model.model, fit::LightModel::kDistant);
   EXPECT_THAT(r.light_model.note, HasSubstr("no sample plane"));
 }
 

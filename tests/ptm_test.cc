@@ -471,7 +471,7 @@ TEST(PtmSummary, RangesAndMemory) {
 // Streaming
 
 void stream_map(const CoefficientMap& map, int band_rows, CoefficientSink& sink) {
-  sink.begin(map.width, map.height, map.model, map.colour_space);
+  sink.begin(map.layout());
   const std::size_t nc = static_cast<std::size_t>(map.polynomials()) * kPtmTerms;
   for (int y0 = 0; y0 < map.height; y0 += band_rows) {
     const int rows = std::min(band_rows, map.height - y0);
@@ -548,7 +548,7 @@ TEST(PtmStream, SpilledCoefficientsGiveTheSameFile) {
     SCOPED_TRACE(std::string(to_string(model)));
     const CoefficientMap map = smooth_map(70, 131, model);  // more rows than one slice
     PtmStreamWriter in_memory(dir / "memory.ptm");
-    in_memory.begin(1, 1, model, ColourSpace::kSRGB);
+    in_memory.begin({1, 1, Basis::kPtm, model, ColourSpace::kSRGB});
     EXPECT_FALSE(in_memory.spilled());
     stream_map(map, 9, in_memory);  // begins again, for the map's size
     const std::vector<std::uint8_t> expected = read_ptm_file(dir / "memory.ptm").data;
@@ -563,7 +563,7 @@ TEST(PtmStream, SpilledCoefficientsGiveTheSameFile) {
       PtmWriteOptions spill;
       spill.spill_above_bytes = budget;
       PtmStreamWriter spilled(dir / "spilled.ptm", spill);
-      spilled.begin(70, 131, model, ColourSpace::kSRGB);
+      spilled.begin({70, 131, Basis::kPtm, model, ColourSpace::kSRGB});
       EXPECT_TRUE(spilled.spilled());
       stream_map(map, 9, spilled);
       EXPECT_EQ(expected, read_ptm_file(dir / "spilled.ptm").data);
@@ -579,14 +579,14 @@ TEST(PtmStream, BufferIsHalfFloatSized) {
   test::ScratchDir dir;
   const CoefficientMap map = smooth_map(20, 10, ColourModel::kYCC);
   PtmStreamWriter writer(dir / "s.ptm");
-  writer.begin(20, 10, ColourModel::kYCC, ColourSpace::kSRGB);
+  writer.begin({20, 10, Basis::kPtm, ColourModel::kYCC, ColourSpace::kSRGB});
   // a0..a4 shared plus three a5, 2 bytes each.
   EXPECT_EQ(writer.buffer_bytes(), 200u * 8u * 2u);
   PtmStreamWriter rgb(dir / "r.ptm");
-  rgb.begin(20, 10, ColourModel::kRGB, ColourSpace::kSRGB);
+  rgb.begin({20, 10, Basis::kPtm, ColourModel::kRGB, ColourSpace::kSRGB});
   EXPECT_EQ(rgb.buffer_bytes(), 200u * 18u * 2u);
   PtmStreamWriter lrgb(dir / "l.ptm");
-  lrgb.begin(20, 10, ColourModel::kLRGB, ColourSpace::kSRGB);
+  lrgb.begin({20, 10, Basis::kPtm, ColourModel::kLRGB, ColourSpace::kSRGB});
   EXPECT_EQ(lrgb.buffer_bytes(), 200u * (6u * 2u + 3u));
   (void)map;
 }
@@ -596,7 +596,7 @@ TEST(PtmStream, MisuseAndBadValuesLeaveNoFile) {
   const CoefficientMap map = smooth_map(8, 8, ColourModel::kRGB);
   {
     PtmStreamWriter writer(dir / "order.ptm");
-    writer.begin(8, 8, ColourModel::kRGB, ColourSpace::kSRGB);
+    writer.begin({8, 8, Basis::kPtm, ColourModel::kRGB, ColourSpace::kSRGB});
     EXPECT_THROW(writer.write_rows(2, 2, map.coeffs.data(), nullptr), std::logic_error);
     writer.write_rows(0, 4, map.coeffs.data(), nullptr);
     EXPECT_THROW(writer.end(), std::logic_error);

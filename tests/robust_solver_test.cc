@@ -141,10 +141,9 @@ TEST(RobustSolver, ResultsDoNotDependOnThreadsOrBands) {
         o.band_rows = band;
         FitOutputs out;
         out.want_labels = true;
-        o.outputs = &out;
         CoefficientMap map;
         CoefficientMapSink sink(&map);
-        (void)fit_images(stack.observed, stack.dirs, o, sink);
+        (void)fit_images(stack.observed, stack.dirs, o, sink, &out);
         if (first.empty()) {
           first = map.coeffs;
           first_labels = out.labels;
@@ -186,10 +185,9 @@ TEST(RobustSolver, AllModelsAndDarkOrSaturatedTexelsStayFinite) {
     out.want_normals = true;
     out.want_residual_map = true;
     out.want_outlier_counts = true;
-    o.outputs = &out;
     CoefficientMap map;
     CoefficientMapSink sink(&map);
-    const FitReport rep = fit_images(stack.observed, stack.dirs, o, sink);
+    const FitReport rep = fit_images(stack.observed, stack.dirs, o, sink, &out);
     for (float v : map.coeffs) ASSERT_TRUE(std::isfinite(v));
     for (float v : map.colour) ASSERT_TRUE(std::isfinite(v));
     float rgb[3];

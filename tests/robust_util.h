@@ -51,11 +51,10 @@ inline SolverScores score_solver(const SynthStack& s, fit::Solver solver,
   fit::FitOutputs out;
   out.want_labels = true;
   out.want_normals = true;
-  o.outputs = &out;
   CoefficientMap map;
   CoefficientMapSink sink(&map);
   SolverScores r;
-  r.report = fit::fit_images(s.observed, s.dirs, o, sink);
+  r.report = fit::fit_images(s.observed, s.dirs, o, sink, &out);
   r.psnr_db = fit::psnr_against_truth(map, s.dirs, s.diffuse, s.scene.normals).psnr_db;
   r.outliers_all =
       fit::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, false);

@@ -19,8 +19,9 @@ namespace {
 
 using test::ScratchDir;
 
-texture::RtiMap random_map(int w, int h, int terms, std::uint64_t seed) {
-  texture::RtiMap m(w, h, terms);
+CoefficientMap random_map(int w, int h, int terms, std::uint64_t seed) {
+  const Basis basis = terms == 4 ? Basis::kHsh2 : terms == 9 ? Basis::kHsh3 : Basis::kHsh4;
+  CoefficientMap m({w, h, basis, ColourModel::kRGB, ColourSpace::kSRGB});
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<float> u(-0.5f, 0.5f);
   for (float& c : m.coeffs) c = u(rng);
@@ -68,16 +69,16 @@ TEST(RtiBasis, FitAndTextureStagesAgree) {
 TEST(RtiFile, WriteReadRoundTrip) {
   ScratchDir dir;
   for (int terms : {4, 9, 16}) {
-    const texture::RtiMap m = random_map(7, 5, terms, test::test_seed() + terms);
+    const CoefficientMap m = random_map(7, 5, terms, test::test_seed() + terms);
     std::string name = "m";
     name.append(std::to_string(terms)).append(".rti");
     const auto path = dir / name;
     const texture::RtiWriteReport rep = texture::write_rti(path, m);
     EXPECT_EQ(rep.file_bytes, std::filesystem::file_size(path));
-    const texture::RtiMap r = texture::read_rti(path);
+    const CoefficientMap r = texture::read_rti(path);
     ASSERT_EQ(r.width, 7);
     ASSERT_EQ(r.height, 5);
-    ASSERT_EQ(r.terms, terms);
+    ASSERT_EQ(r.terms(), terms);
     ASSERT_EQ(r.coeffs.size(), m.coeffs.size());
     // Half a quantisation step of a range of at most 1.0.
     double max_err = 0.0;
@@ -101,7 +102,7 @@ TEST(RtiFile, WriteReadRoundTrip) {
 
 TEST(RtiFile, MalformedFilesNameTheFile) {
   ScratchDir dir;
-  const texture::RtiMap m = random_map(4, 3, 9, test::test_seed());
+  const CoefficientMap m = random_map(4, 3, 9, test::test_seed());
   const auto good = dir / "good.rti";
   texture::write_rti(good, m);
   const std::string bytes = read_bytes(good);
@@ -138,11 +139,11 @@ TEST(RtiFile, MalformedFilesNameTheFile) {
 
 TEST(RtiRelight, MatchesTheBasisSumAndTheCli) {
   ScratchDir dir;
-  texture::RtiMap m = random_map(6, 4, 9, test::test_seed() + 7);
+  CoefficientMap m = random_map(6, 4, 9, test::test_seed() + 7);
   for (float& c : m.coeffs) c = 0.3f + 0.2f * c;
   const auto path = dir / "t.rti";
   texture::write_rti(path, m);
-  const texture::RtiMap r = texture::read_rti(path);
+  const CoefficientMap r = texture::read_rti(path);
   const Eigen::Vector3d l = Eigen::Vector3d(0.3, -0.2, 0.8).normalized();
   texture::RelightOptions no_clamp;
   no_clamp.clamp = false;
@@ -153,7 +154,7 @@ TEST(RtiRelight, MatchesTheBasisSumAndTheCli) {
     for (int x = 0; x < r.width; ++x) {
       for (int k = 0; k < 3; ++k) {
         double v = 0.0;
-        for (int j = 0; j < 9; ++j) v += r.texel(x, y)[k * 9 + j] * b[j];
+        for (int j = 0; j < 9; ++j) v += r.texel_coeffs(x, y)[k * 9 + j] * b[j];
         EXPECT_NEAR(img.at(x, y, k), v, 1e-5);
       }
     }

@@ -147,7 +147,7 @@ TEST(WebExport, YccMapIsExportedAsRgbWithTheSameColours) {
 
 TEST(WebExport, HshPlanesAndDeepZoomPyramid) {
   ScratchDir tmp;
-  RtiMap m(150, 70, 9);
+  CoefficientMap m({150, 70, Basis::kHsh3, ColourModel::kRGB, ColourSpace::kSRGB});
   for (std::size_t i = 0; i < m.coeffs.size(); ++i)
     m.coeffs[i] = static_cast<float>(std::sin(0.37 * static_cast<double>(i)));
   WebExportOptions o;
@@ -194,7 +194,7 @@ TEST(WebExport, HshPlanesAndDeepZoomPyramid) {
     const int k = 6 + c;  // JPEG 2 holds HSH term 2 of R, G, B
     const double scale = info["materials"][0]["scale"][k], bias = info["materials"][0]["bias"][k];
     const double got = (std::round(tile.at(1, 1, c) * 255.0) / 255.0 - bias) * scale;
-    EXPECT_NEAR(got, m.texel(32, 32)[c * 9 + 2], 12.0 / 255.0 * scale) << c;
+    EXPECT_NEAR(got, m.texel_coeffs(32, 32)[c * 9 + 2], 12.0 / 255.0 * scale) << c;
   }
 }
 

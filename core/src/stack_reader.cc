@@ -1,5 +1,6 @@
 #include "ptmkit/core/stack_reader.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -16,11 +17,7 @@ namespace ptmkit {
 
 namespace {
 
-// Colour channels to read: an alpha channel (RGBA, grey+alpha) is not a sample.
-int colour_channels(const OIIO::ImageSpec& spec) {
-  if (spec.nchannels == 4 || spec.nchannels == 2) return spec.nchannels - 1;
-  return std::min(spec.nchannels, 3);
-}
+int colour_channels(const OIIO::ImageSpec& spec) { return sample_channels(spec.nchannels); }
 
 }  // namespace
 
@@ -198,6 +195,49 @@ std::vector<Image> read_stack(const std::vector<fs::path>& files) {
     }
   }
   return images;
+}
+
+int sample_channels(int channels) {
+  if (channels == 4 || channels == 2) return channels - 1;
+  return std::min(channels, 3);
+}
+
+bool read_image_band(const std::vector<Image>& images, int y0, int rows, StackBand* band) {
+  if (images.empty()) throw Error("no images");
+  const int w = images[0].width();
+  const int h = images[0].height();
+  const int src_ch = images[0].channels();
+  if (y0 >= h) return false;
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    if (images[i].width() != w || images[i].height() != h || images[i].channels() != src_ch) {
+      throw Error("image " + std::to_string(i) + " differs in size or channels from image 0");
+    }
+  }
+  const int ch = sample_channels(src_ch);
+  band->y0 = y0;
+  band->rows = std::min(rows, h - y0);
+  band->width = w;
+  band->channels = ch;
+  band->images = static_cast<int>(images.size());
+  band->is_u8 = false;
+  band->bytes.clear();
+  band->samples.resize(band->image_stride() * images.size());
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    float* dst = band->image(static_cast<int>(i));
+    for (int r = 0; r < band->rows; ++r) {
+      const float* src = images[i].row(y0 + r);
+      for (int x = 0; x < w; ++x) {
+        for (int c = 0; c < ch; ++c) {
+          const float v = src[x * src_ch + c];
+          if (!std::isfinite(v)) {
+            throw Error("image " + std::to_string(i) + " has a NaN or infinite sample");
+          }
+          *dst++ = v;
+        }
+      }
+    }
+  }
+  return true;
 }
 
 }  // namespace ptmkit

@@ -331,14 +331,13 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
       }
     }
     if (truth) {
-      FitOptions o = base_options(options, s);
+      const FitOptions o = base_options(options, s);
       FitOutputs out;
       out.want_labels = report.has_truth;
       out.want_normals = true;
-      o.outputs = &out;
       CoefficientMap tmap;
       CoefficientMapSink sink(&tmap);
-      (void)fit_images(cap.images, cap.dirs, o, sink);
+      (void)fit_images(cap.images, cap.dirs, o, sink, &out);
       r.normals =
           normal_error(out.normals, truth->normals, truth->mask.empty() ? nullptr : &truth->mask);
       if (report.has_truth) {

@@ -7,9 +7,13 @@
 
 #include "ptmkit/core/colour.h"
 
-#if defined(__x86_64__) || defined(__i386__)
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(PTMKIT_NO_X86_SIMD)
 #include <immintrin.h>
 #define PTMKIT_PINV_X86 1
+// An AVX2 clone beside the portable code, chosen at load time.
+#define PTMKIT_AVX2_CLONE __attribute__((target_clones("avx2", "default")))
+#else
+#define PTMKIT_AVX2_CLONE
 #endif
 
 namespace ptmkit::fit::internal {
@@ -329,9 +333,8 @@ void luma_lrgb_row(const float* s, int w, float scale, float* yi, float* s0, flo
 }
 
 // The seed paper's constant chromaticity: luma, and luminance-weighted sums of Cb and Cr.
-__attribute__((target_clones("avx2", "default"))) void luma_ycc_row(const float* s, int w,
-                                                                    float* yi, float* s0, float* s1,
-                                                                    float* s2) {
+PTMKIT_AVX2_CLONE void luma_ycc_row(const float* s, int w, float* yi, float* s0, float* s1,
+                                    float* s2) {
   for (int x = 0; x < w; ++x) {
     const float l = kLumaRf * s[3 * x] + kLumaGf * s[3 * x + 1] + kLumaBf * s[3 * x + 2];
     yi[x] = l;
@@ -373,10 +376,8 @@ void lrgb_row_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t st
 // ---- LRGB colour ----
 
 void finish_lrgb_colour(double yy, const double yc[3], float* colour, float* coeffs) {
-  double k[3] = {1.0, 1.0, 1.0};
-  if (yy > 1e-20) {
-    for (int c = 0; c < 3; ++c) k[c] = std::max(0.0, yc[c] / yy);
-  }
+  const LrgbSums sums{yy, {yc[0], yc[1], yc[2]}};
+  double k[3] = {sums.factor(0), sums.factor(1), sums.factor(2)};
   double m = std::max({k[0], k[1], k[2]});
   if (m <= 1e-12) {
     k[0] = k[1] = k[2] = 1.0;

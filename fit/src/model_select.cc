@@ -51,20 +51,17 @@ void predict_texel(const SampleGrid& g, int t, const std::vector<int>& idx,
   const int nch = g.channels == 3 ? 3 : 1;
   Eigen::VectorXd y(n);
   if (lum) {
-    double yy = 0.0, yc[3] = {0, 0, 0};
+    LrgbSums sums;
     for (Eigen::Index i = 0; i < n; ++i) {
       const int li = idx[static_cast<std::size_t>(i)];
       const double r = g.at(t, li, 0), gg = g.at(t, li, 1), b = g.at(t, li, 2);
       y(i) = nch == 3 ? luma(r, gg, b) : r;
-      yy += y(i) * y(i);
-      yc[0] += y(i) * r;
-      yc[1] += y(i) * gg;
-      yc[2] += y(i) * b;
+      sums.add(1.0, y(i), r, gg, b);
     }
     const Eigen::VectorXd pred = b_test * (p * y);
     for (std::size_t j = 0; j < test.size(); ++j) {
       for (int k = 0; k < nch; ++k) {
-        const double kc = yy > 1e-20 ? std::max(0.0, yc[k] / yy) : 1.0;
+        const double kc = sums.factor(k);
         const double v = clamp ? clampv(pred(static_cast<Eigen::Index>(j)) * kc, g.clamp_top)
                                : pred(static_cast<Eigen::Index>(j)) * kc;
         const double e = 255.0 * (v - g.at(t, test[j], k));

@@ -12,6 +12,10 @@
 
 namespace ptmkit::fit {
 
+std::string_view to_string(LightModel model) {
+  return model == LightModel::kNear ? "near" : "distant";
+}
+
 std::string NearLightOptions::validate() const {
   if (falloff && !plane) {
     return "fall-off correction needs the near-light model: a sample plane and light positions";
@@ -73,7 +77,7 @@ void NearLightModel::texel(int x, int y, double* dirs, double* correction) const
 
 NearLightReport NearLightModel::field_report() const {
   NearLightReport r;
-  r.model = "near";
+  r.model = LightModel::kNear;
   const std::size_t n = positions_.size();
   if (n == 0) return r;
   constexpr int kGrid = 17;

@@ -167,7 +167,7 @@ ConvertReport convert_to_rti(const fs::path& input, const fs::path& output,
   report.output = output;
   const LoadedTexture tex = read_texture(input);
   report.from = tex.format;
-  report.to = "RTI HSH " + std::to_string(tex.hsh.terms) + " terms";
+  report.to = "RTI HSH " + std::to_string(tex.hsh.terms()) + " terms";
   if (!tex.is_hsh) {
     refuse(input, report.from, "RTI HSH",
            "an HSH basis does not hold a biquadratic polynomial exactly (the conversion is "

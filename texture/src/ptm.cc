@@ -624,6 +624,10 @@ PtmFile encode_ptm(const CoefficientMap& map, const PtmWriteOptions& options,
     throw Error("cannot encode a " + std::to_string(map.width) + " x " +
                 std::to_string(map.height) + " map as PTM");
   }
+  if (map.basis != Basis::kPtm) {
+    throw Error("cannot encode a " + std::string(to_string(map.basis)) +
+                " map as PTM (the format holds the ptm basis; write an .rti)");
+  }
   const PtmFormat format = internal::format_for(map.model);
   const MapSource source(map);
   std::array<double, kPtmTerms> lo{}, hi{};

@@ -18,6 +18,11 @@ namespace fs = std::filesystem;
 
 namespace ptmkit::texture {
 
+namespace {
+Image relight_basis(const CoefficientMap& map, const Eigen::Vector3d& l,
+                    const RelightOptions& options);
+}  // namespace
+
 Eigen::Vector3d normalised_light(const Eigen::Vector3d& light_dir) {
   const double n = light_dir.norm();
   if (!light_dir.allFinite() || !std::isfinite(n) || n == 0.0) {
@@ -32,6 +37,7 @@ Eigen::Vector3d normalised_light(const Eigen::Vector3d& light_dir) {
 Image relight(const CoefficientMap& map, const Eigen::Vector3d& light_dir,
               const RelightOptions& options) {
   const Eigen::Vector3d l = normalised_light(light_dir);
+  if (map.basis != Basis::kPtm) return relight_basis(map, l, options);
   Image out(map.width, map.height, 3, map.colour_space, 0.0f);
   if (l.z() <= 0.0 || out.empty()) return out;  // no light from behind the surface
   tbb::parallel_for(tbb::blocked_range<int>(0, map.height), [&](const tbb::blocked_range<int>& r) {
@@ -208,25 +214,26 @@ RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& li
       [&](const Eigen::Vector3d& l) { return relight(map, l, options.relight); }, lights, options);
 }
 
-RelightSetReport relight_light_set(const RtiMap& map, const LightSet& lights,
-                                   const RelightSetOptions& options) {
-  return relight_set_impl(
-      map.width, map.height, map.colour_space,
-      [&](const Eigen::Vector3d& l) { return relight(map, l, options.relight); }, lights, options);
-}
+namespace {
 
-Image relight(const RtiMap& map, const Eigen::Vector3d& light_dir, const RelightOptions& options) {
-  const Eigen::Vector3d l = normalised_light(light_dir);
+// A map in another basis than PTM (HSH, rgb layout): the basis at the light, summed per
+// channel.
+Image relight_basis(const CoefficientMap& map, const Eigen::Vector3d& l,
+                    const RelightOptions& options) {
   Image out(map.width, map.height, 3, map.colour_space, 0.0f);
   if (l.z() <= 0.0 || out.empty()) return out;  // no light from behind the surface
-  const int t = map.terms;
+  if (map.model != ColourModel::kRGB) {
+    throw Error("relight: a " + std::string(to_string(map.basis)) +
+                " map is relit in the rgb layout only");
+  }
+  const int t = map.terms();
   double b[16];
   hsh_basis(t, l, b);
   tbb::parallel_for(tbb::blocked_range<int>(0, map.height), [&](const tbb::blocked_range<int>& r) {
     for (int y = r.begin(); y < r.end(); ++y) {
       float* row = out.row(y);
       for (int x = 0; x < map.width; ++x) {
-        const float* c = map.texel(x, y);
+        const float* c = map.texel_coeffs(x, y);
         float* rgb = row + 3 * static_cast<std::size_t>(x);
         for (int k = 0; k < 3; ++k) {
           double v = 0.0;
@@ -239,5 +246,7 @@ Image relight(const RtiMap& map, const Eigen::Vector3d& light_dir, const Relight
   });
   return out;
 }
+
+}  // namespace
 
 }  // namespace ptmkit::texture

@@ -48,18 +48,28 @@ int hsh_order(int terms) {
   }
 }
 
-RtiMap::RtiMap(int w, int h, int t, ColourSpace cs)
-    : width(w),
-      height(h),
-      terms(t),
-      colour_space(cs),
-      coeffs(static_cast<std::size_t>(w) * h * 3 * t, 0.0f) {}
+Basis hsh_basis_of_terms(int terms) {
+  switch (terms) {
+    case 4:
+      return Basis::kHsh2;
+    case 9:
+      return Basis::kHsh3;
+    case 16:
+      return Basis::kHsh4;
+    default:
+      throw Error("an HSH basis has 4, 9 or 16 terms, not " + std::to_string(terms));
+  }
+}
 
-RtiWriteReport write_rti(const fs::path& path, const RtiMap& map) {
-  const int t = map.terms;
-  if (hsh_order(t) == 0) {
-    throw Error(where(path) + ": an HSH .rti has 4, 9 or 16 terms, the map has " +
-                std::to_string(t));
+RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
+  const int t = map.terms();
+  if (map.basis == Basis::kPtm || hsh_order(t) == 0) {
+    throw Error(where(path) + ": an .rti holds an HSH basis (4, 9 or 16 terms), the map is " +
+                std::string(to_string(map.basis)));
+  }
+  if (map.model != ColourModel::kRGB) {
+    throw Error(where(path) + ": an .rti holds three channels of coefficients, the map is " +
+                std::string(to_string(map.model)));
   }
   if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * t) {
     throw Error(where(path) + ": the map's size does not match its coefficients");
@@ -142,7 +152,7 @@ std::vector<long long> parse_ints(const fs::path& path, const std::string& line,
 
 }  // namespace
 
-RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
+CoefficientMap read_rti(const fs::path& path, ColourSpace colour_space) {
   // Regular files only (a device never ends), read only if they fit in memory.
   const std::uintmax_t file_bytes =
       checked_input_size(path, std::numeric_limits<std::uintmax_t>::max(), ".rti file");
@@ -207,7 +217,7 @@ RtiMap read_rti(const fs::path& path, ColourSpace colour_space) {
   check_allocation(path, checked_multiply(path, coeff_count, sizeof(float)),
                    "the " + std::to_string(w) + " x " + std::to_string(h) + " x " +
                        std::to_string(t) + "-term coefficients");
-  RtiMap map(w, h, t, colour_space);
+  CoefficientMap map({w, h, hsh_basis_of_terms(t), ColourModel::kRGB, colour_space});
   std::vector<float> scale(t), bias(t);
   std::memcpy(scale.data(), data.data() + pos, sizeof(float) * t);
   std::memcpy(bias.data(), data.data() + pos + sizeof(float) * t, sizeof(float) * t);
@@ -233,13 +243,13 @@ bool looks_like_rti(const fs::path& path) {
 }
 
 RtiSummary summarise_rti(const std::filesystem::path& path) {
-  const RtiMap map = read_rti(path);
+  const CoefficientMap map = read_rti(path);
   RtiSummary out;
   out.width = map.width;
   out.height = map.height;
-  out.terms = map.terms;
-  out.order = hsh_order(map.terms);
-  const auto terms = static_cast<std::size_t>(map.terms);
+  out.terms = map.terms();
+  out.order = hsh_order(map.terms());
+  const auto terms = static_cast<std::size_t>(map.terms());
   out.coeff_min.assign(terms, std::numeric_limits<double>::infinity());
   out.coeff_max.assign(terms, -std::numeric_limits<double>::infinity());
   for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
@@ -248,9 +258,26 @@ RtiSummary summarise_rti(const std::filesystem::path& path) {
     out.coeff_max[k] = std::max(out.coeff_max[k], static_cast<double>(map.coeffs[i]));
   }
   out.file_bytes = static_cast<std::size_t>(std::filesystem::file_size(path));
-  out.file_bytes_per_texel = 3 * map.terms;
-  out.map_bytes_per_texel = 3 * map.terms * static_cast<int>(sizeof(float));
+  out.file_bytes_per_texel = 3 * map.terms();
+  out.map_bytes_per_texel = 3 * map.terms() * static_cast<int>(sizeof(float));
   return out;
+}
+
+void RtiWriter::begin(const CoefficientLayout& layout) {
+  if (layout.basis == Basis::kPtm || layout.model != ColourModel::kRGB) {
+    throw Error(where(path_) + ": an .rti holds an HSH basis in three channels, not " +
+                std::string(to_string(layout.basis)) + " " + std::string(to_string(layout.model)));
+  }
+  sink_.begin(layout);
+}
+
+void RtiWriter::write_rows(int y0, int rows, const float* coeffs, const float* colour) {
+  sink_.write_rows(y0, rows, coeffs, colour);
+}
+
+void RtiWriter::end() {
+  report_ = write_rti(path_, map_);
+  map_ = CoefficientMap();  // the memory back
 }
 
 }  // namespace ptmkit::texture

@@ -29,7 +29,7 @@ LoadedTexture read_texture(const fs::path& path, ColourSpace colour_space) {
     case TextureSource::kRti:
       t.is_hsh = true;
       t.hsh = read_rti(path, colour_space);
-      t.format = "RTI HSH " + std::to_string(t.hsh.terms) + " terms";
+      t.format = "RTI HSH " + std::to_string(t.hsh.terms()) + " terms";
       break;
     case TextureSource::kPtm: {
       const PtmFile file = read_ptm_file(path);

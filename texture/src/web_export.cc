@@ -157,24 +157,26 @@ PlaneSource planes_of(const CoefficientMap& map) {
   return s;
 }
 
-PlaneSource planes_of(const RtiMap& map) {
+// An HSH map (the rgb layout .rti holds).
+PlaneSource hsh_planes_of(const CoefficientMap& map) {
   PlaneSource s;
   s.type = "hsh";
   s.colorspace = "rgb";
   s.width = map.width;
   s.height = map.height;
-  if (map.terms != 4 && map.terms != 9 && map.terms != 16) {
-    throw Error("web export: HSH map with " + std::to_string(map.terms) +
-                " terms (4, 9 or 16 are exported)");
+  const int t = map.terms();
+  if (map.model != ColourModel::kRGB) {
+    throw Error("web export: an HSH map is exported in the rgb layout, not " +
+                std::string(to_string(map.model)));
   }
-  if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * map.terms) {
+  if (map.width <= 0 || map.height <= 0 ||
+      map.coeffs.size() != map.texels() * 3 * static_cast<std::size_t>(t)) {
     throw Error("web export: the HSH map is empty or its buffer does not match its size");
   }
-  s.planes = 3 * map.terms;
-  const int t = map.terms;
+  s.planes = 3 * t;
   s.fill_row = [&map, t](int y, float* out) {
     for (int x = 0; x < map.width; ++x, out += 3 * t) {
-      const float* c = map.texel(x, y);
+      const float* c = map.texel_coeffs(x, y);
       for (int j = 0; j < t; ++j) {
         for (int k = 0; k < 3; ++k) out[3 * j + k] = c[k * t + j];
       }
@@ -681,12 +683,8 @@ WebExportReport export_planes(const PlaneSource& src, const fs::path& dir,
 
 WebExportReport export_web(const CoefficientMap& map, const fs::path& dir,
                            const WebExportOptions& options) {
-  return export_planes(planes_of(map), dir, options);
-}
-
-WebExportReport export_web(const RtiMap& map, const fs::path& dir,
-                           const WebExportOptions& options) {
-  return export_planes(planes_of(map), dir, options);
+  return export_planes(map.basis == Basis::kPtm ? planes_of(map) : hsh_planes_of(map), dir,
+                       options);
 }
 
 }  // namespace ptmkit::texture

@@ -292,7 +292,8 @@ WebTexture read_web_folder(const fs::path& path, ColourSpace colour_space) {
   if (info.type == "hsh") {
     out.is_hsh = true;
     const int terms = info.nplanes / 3;
-    out.hsh = RtiMap(info.width, info.height, terms, colour_space);
+    out.hsh = CoefficientMap(
+        {info.width, info.height, hsh_basis_of_terms(terms), ColourModel::kRGB, colour_space});
     tbb::parallel_for(std::size_t{0}, texels, [&](std::size_t i) {
       float* t = out.hsh.coeffs.data() + i * 3 * static_cast<std::size_t>(terms);
       for (int c = 0; c < 3; ++c) {

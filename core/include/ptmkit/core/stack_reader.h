@@ -76,6 +76,18 @@ class StackReader {
   std::unique_ptr<Impl> impl_;
 };
 
+// The sample channels of a stack whose files or images have `channels` channels: an alpha
+// channel is not a sample (RGBA gives 3, grey + alpha 1), and at most 3 are read. One rule for
+// files (StackReader) and images in memory (read_image_band).
+[[nodiscard]] int sample_channels(int channels);
+
+// Rows [y0, y0 + rows) (fewer at the bottom) of images already in memory into `band`, as
+// StackReader would give them from files (float storage, sample_channels' rule, image-major).
+// Returns false when y0 is past the last row. Throws ptmkit::Error when the images are empty,
+// differ in size or channel count, or a sample read is NaN or infinite (naming the image's
+// index).
+bool read_image_band(const std::vector<Image>& images, int y0, int rows, StackBand* band);
+
 // Convenience for small stacks (tests, comparisons): every image decoded whole.
 [[nodiscard]] std::vector<Image> read_stack(const std::vector<std::filesystem::path>& files);
 

@@ -6,6 +6,11 @@
 // pseudo-inverse (see design.h); the robust ones label and weight each texel's samples first
 // (see robust.h). Results are identical whatever the thread count.
 //
+// The pipeline: a band source (the capture's files through core's StackReader, or images in
+// memory, one channel rule) -> a row fitter (the shared pseudo-inverse for distant lights;
+// per texel for robust solvers and near lights; any basis, FitOptions::basis) -> a
+// CoefficientSink (core/coefficients.h: a .ptm or .rti writer, or a map in memory).
+//
 // Near lights (near_light.h): given a sample plane (FitOptions::near.plane) and a position for
 // every light, each texel gets its own design rows and 6 x 6 normal equations (double), and
 // optionally a fall-off correction. Only the least-squares solvers ls and ridge support it so
@@ -21,6 +26,7 @@
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
+#include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/design.h"
 #include "ptmkit/fit/near_light.h"
 #include "ptmkit/fit/robust.h"
@@ -32,8 +38,8 @@ enum class Precision {
   kDouble,  // everything in double (for exactness checks)
 };
 
-// Per-texel maps a fit can fill on request (FitOptions::outputs). Each is produced only when
-// its want_ flag is set; sizes are the capture's.
+// Per-texel maps a fit can fill on request (the `outputs` argument of fit_capture, PTM basis). Each
+// is produced only when its want_ flag is set; sizes are the capture's.
 struct FitOutputs {
   bool want_residual_map = false;
   bool want_outlier_counts = false;
@@ -62,6 +68,10 @@ void write_label_images(const std::filesystem::path& dir, const FitOutputs& outp
                         const LightSet& lights, int width, int height);
 
 struct FitOptions {
+  // The function basis (core/coefficients.h). kPtm (default): the six-term polynomial, every
+  // solver, near lights and the optional maps. The HSH bases: the least-squares solvers
+  // (ls, qr, svd, ridge; the operator is built by SVD whichever), distant lights, rgb or lrgb.
+  Basis basis = Basis::kPtm;
   // Colour model (see core/coefficients.h). kRGB is the default: it is the most accurate on
   // the measured sets (docs/FITTING.md) and what RGB .ptm viewers show; kLRGB halves storage.
   ColourModel model = ColourModel::kRGB;
@@ -85,8 +95,6 @@ struct FitOptions {
   // others label each texel's samples (robust.h) and cost microseconds per texel.
   Solver solver = Solver::kLS;
   RobustOptions robust;
-  // Optional per-texel maps (not owned; filled when non-null).
-  FitOutputs* outputs = nullptr;
   // Near lights: the sample plane and fall-off correction (near_light.h). With a plane, every
   // light must have a position_mm, the solver must be ls or ridge, and `precision` is ignored
   // (per-texel solves are in double).
@@ -123,6 +131,8 @@ struct FitReport {
   int width = 0;
   int height = 0;
   int channels = 0;
+  Basis basis = Basis::kPtm;
+  // The colour model fitted (grey input to an HSH basis: kLRGB, its luminance).
   ColourModel model = ColourModel::kRGB;
   ColourSpace colour_space = ColourSpace::kSRGB;
   DesignReport design;
@@ -142,22 +152,29 @@ struct FitReport {
   }
   // JSON text of the whole report.
   [[nodiscard]] std::string to_json() const;
+  // One line: lights, size, basis and colour model, cond(A), residual, time.
+  [[nodiscard]] std::string brief() const;
 };
 
-// Fits the images of `lights` (read through core's StackReader) into `sink`. Throws
-// ptmkit::Error on a bad layout or unreadable/mismatched images (naming the file); the sink
-// has then received begin() at most, never end(). With options.near.plane set, the lights'
-// position_mm give the near-light model: a light without one, a plane of another size than
-// the images, or a solver other than ls/ridge is an error.
-FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink);
+// Fits the images of `lights` (read through core's StackReader) into `sink`, and fills the
+// maps `outputs` asks for (optional). Throws ptmkit::Error on a bad layout or
+// unreadable/mismatched images (naming the file); the sink has then received begin() at most,
+// never end(). With options.near.plane set, the lights' position_mm give the near-light model:
+// a light without one, a plane of another size than the images, or a solver other than
+// ls/ridge is an error. The sink receives options.basis's layout (CoefficientSink::begin).
+FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink,
+                      FitOutputs* outputs = nullptr);
 
-// The same on images already in memory (all the same size), one per direction.
+// The same on images already in memory (all the same size and channel count), one per
+// direction. An alpha channel is not a sample (RGBA is fitted as RGB, grey + alpha as grey),
+// as from files.
 FitReport fit_images(const std::vector<Image>& images,
                      const std::vector<Eigen::Vector3d>& light_dirs, const FitOptions& options,
-                     CoefficientSink& sink);
+                     CoefficientSink& sink, FitOutputs* outputs = nullptr);
 // The same with a light set (its directions, and its positions for the near-light model as in
 // fit_capture; the lights' image paths are not used).
 FitReport fit_images(const std::vector<Image>& images, const LightSet& lights,
-                     const FitOptions& options, CoefficientSink& sink);
+                     const FitOptions& options, CoefficientSink& sink,
+                     FitOutputs* outputs = nullptr);
 
 }  // namespace ptmkit::fit

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -39,9 +40,15 @@ struct NearLightOptions {
   [[nodiscard]] std::string validate() const;  // empty if valid
 };
 
+// How a fit treats its lights: distant (one direction per light, the shared design) or near
+// (each texel its own directions from the lights' positions and the sample plane).
+enum class LightModel { kDistant, kNear };
+// "distant", "near".
+[[nodiscard]] std::string_view to_string(LightModel model);
+
 // What the light model is and how much the field matters (FitReport::light_model).
 struct NearLightReport {
-  std::string model = "distant";  // "distant" or "near"
+  LightModel model = LightModel::kDistant;
   // Near model: over a 17 x 17 grid of texels spanning the image (corners included), the
   // largest and the mean (over lights) of each light's largest angle between its direction at
   // a texel and its direction at the plane centre, degrees.

@@ -268,7 +268,8 @@ class PtmStreamWriter final : public CoefficientSink {
   PtmStreamWriter(const PtmStreamWriter&) = delete;
   PtmStreamWriter& operator=(const PtmStreamWriter&) = delete;
 
-  void begin(int width, int height, ColourModel model, ColourSpace colour_space) override;
+  // Throws ptmkit::Error for a basis other than PTM or a size the format cannot hold.
+  void begin(const CoefficientLayout& layout) override;
   // Bands must arrive top to bottom, consecutive; anything else throws std::logic_error.
   void write_rows(int y0, int rows, const float* coeffs, const float* colour) override;
   // Throws std::logic_error if rows are missing, ptmkit::Error if the write fails.

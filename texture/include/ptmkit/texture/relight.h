@@ -30,11 +30,9 @@ struct RelightOptions {
 // Output: 3 channels (RGB), normalised units, in the map's colour space. Rows are computed in
 // parallel; every pixel depends only on its texel, so the result is the same for any number
 // of threads.
+// Any basis: PTM maps by CoefficientMap::evaluate, HSH maps (.rti, texture/rti.h) by the basis
+// at the light summed per channel.
 [[nodiscard]] Image relight(const CoefficientMap& map, const Eigen::Vector3d& light_dir,
-                            const RelightOptions& options = {});
-
-// The same for an HSH texture (.rti, texture/rti.h): the basis at the light, summed per channel.
-[[nodiscard]] Image relight(const RtiMap& map, const Eigen::Vector3d& light_dir,
                             const RelightOptions& options = {});
 
 // `light_dir` normalised; throws ptmkit::Error if it is non-finite or zero.
@@ -80,9 +78,6 @@ struct RelightSetReport {
 // checked first (photo sizes, mask, name clashes); if anything fails midway, the images this
 // call had written (and the folder, if it created it) are removed before the Error propagates.
 RelightSetReport relight_light_set(const CoefficientMap& map, const LightSet& lights,
-                                   const RelightSetOptions& options);
-// The same for an HSH texture.
-RelightSetReport relight_light_set(const RtiMap& map, const LightSet& lights,
                                    const RelightSetOptions& options);
 
 }  // namespace ptmkit::texture

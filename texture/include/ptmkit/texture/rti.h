@@ -24,6 +24,7 @@
 
 #include <Eigen/Core>
 
+#include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/hsh.h"
 #include "ptmkit/core/image.h"
 
@@ -31,31 +32,12 @@ namespace ptmkit::texture {
 
 // Terms of an HSH basis of order 2, 3, 4: 4, 9, 16. Throws ptmkit::Error for other orders.
 [[nodiscard]] int hsh_terms(int order);
+// The HSH basis of 4, 9 or 16 terms (core/coefficients.h); throws ptmkit::Error otherwise.
+[[nodiscard]] Basis hsh_basis_of_terms(int terms);
 // Order of a basis with 4, 9 or 16 terms; 0 for any other count.
 [[nodiscard]] int hsh_order(int terms);
 
 using ptmkit::hsh_basis;  // core/hsh.h
-
-// An HSH texture in memory: three colour channels, `terms` coefficients each per texel, in
-// normalised units.
-struct RtiMap {
-  int width = 0;
-  int height = 0;
-  int terms = 9;
-  ColourSpace colour_space = ColourSpace::kSRGB;
-  // [y][x][channel R, G, B][term], rows top to bottom.
-  std::vector<float> coeffs;
-
-  RtiMap() = default;
-  RtiMap(int w, int h, int t, ColourSpace cs = ColourSpace::kSRGB);
-  [[nodiscard]] std::size_t texels() const { return static_cast<std::size_t>(width) * height; }
-  [[nodiscard]] const float* texel(int x, int y) const {
-    return coeffs.data() + (static_cast<std::size_t>(y) * width + x) * 3 * terms;
-  }
-  [[nodiscard]] float* texel(int x, int y) {
-    return coeffs.data() + (static_cast<std::size_t>(y) * width + x) * 3 * terms;
-  }
-};
 
 // What quantisation to 8 bits cost (normalised units).
 struct RtiWriteReport {
@@ -66,9 +48,30 @@ struct RtiWriteReport {
 };
 
 // Quantises (per term, scale and bias from that term's range over all texels and channels)
-// and writes atomically. Throws ptmkit::Error naming the file when the map is malformed
-// (terms not 4, 9 or 16; size mismatch; non-finite coefficients) or the write fails.
-RtiWriteReport write_rti(const std::filesystem::path& path, const RtiMap& map);
+// and writes atomically. The map (core/coefficients.h) is an HSH basis in the rgb layout
+// (luminance fits multiplied out, as the fit delivers them). Throws ptmkit::Error naming the
+// file when the map is malformed (not an HSH basis, not rgb; size mismatch; non-finite
+// coefficients) or the write fails.
+RtiWriteReport write_rti(const std::filesystem::path& path, const CoefficientMap& map);
+
+// A sink (core/coefficients.h) that collects a fit in memory and writes it as an .rti at
+// end(): the quantisation needs every texel's range, so the map is held whole (3 x terms
+// floats per texel). begin() refuses layouts write_rti cannot store.
+class RtiWriter final : public CoefficientSink {
+ public:
+  explicit RtiWriter(std::filesystem::path path) : path_(std::move(path)) {}
+  void begin(const CoefficientLayout& layout) override;
+  void write_rows(int y0, int rows, const float* coeffs, const float* colour) override;
+  void end() override;
+  // Valid after end().
+  [[nodiscard]] const RtiWriteReport& report() const { return report_; }
+
+ private:
+  std::filesystem::path path_;
+  CoefficientMap map_;
+  CoefficientMapSink sink_{&map_};
+  RtiWriteReport report_;
+};
 
 // Reads an uncompressed HSH .rti. Errors (ptmkit::Error naming the file and the problem): a
 // missing or unreadable file, a header that does not parse, an RTI type other than 3 (refused
@@ -77,8 +80,9 @@ RtiWriteReport write_rti(const std::filesystem::path& path, const RtiMap& map);
 // absurd size, a non-finite scale or bias, and a binary block shorter than the header implies
 // (expected and present byte counts). The file does not say what the values are: the caller
 // does (`colour_space`).
-[[nodiscard]] RtiMap read_rti(const std::filesystem::path& path,
-                              ColourSpace colour_space = ColourSpace::kSRGB);
+// The map has the HSH basis of the file and the rgb layout.
+[[nodiscard]] CoefficientMap read_rti(const std::filesystem::path& path,
+                                      ColourSpace colour_space = ColourSpace::kSRGB);
 
 // What an .rti holds, for `ptmkit info`: its basis, size, and each term's coefficient range
 // over every texel and channel (normalised units, after the file's scale and bias).

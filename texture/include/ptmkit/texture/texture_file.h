@@ -17,7 +17,7 @@ struct LoadedTexture {
   TextureSource source = TextureSource::kPtm;
   bool is_hsh = false;  // hsh set, else ptm set
   CoefficientMap ptm;
-  RtiMap hsh;
+  CoefficientMap hsh;  // an HSH basis in the rgb layout (rti.h)
   std::string format;  // "PTM_FORMAT_JPEG_LRGB", "RTI HSH 9 terms", "web ptm rgb image", ...
 };
 // Reads the texture; errors as the format's reader.

@@ -101,9 +101,8 @@ struct WebExportReport {
 // once the new one is complete). Throws ptmkit::Error naming the path and the problem: a
 // malformed or empty map, non-finite coefficients, a normal map of the wrong size, bad
 // options, or a failed write.
+// Any basis: a PTM map (rgb, lrgb, ycc) or an HSH map (.rti's rgb layout).
 WebExportReport export_web(const CoefficientMap& map, const std::filesystem::path& dir,
-                           const WebExportOptions& options = {});
-WebExportReport export_web(const RtiMap& map, const std::filesystem::path& dir,
                            const WebExportOptions& options = {});
 
 // The deep-zoom level count OpenLIME computes for an image: ceil(log2(max(w, h) / tile)) + 1,

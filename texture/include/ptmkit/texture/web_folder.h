@@ -61,7 +61,7 @@ struct WebTexture {
   WebFolderInfo info;
   bool is_hsh = false;
   CoefficientMap ptm;
-  RtiMap hsh;
+  CoefficientMap hsh;  // an HSH basis in the rgb layout (rti.h)
 };
 [[nodiscard]] WebTexture read_web_folder(const std::filesystem::path& path,
                                          ColourSpace colour_space = ColourSpace::kSRGB);

@@ -1,0 +1,180 @@
+#include "ptmkit/fit/plan.h"
+
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "ptmkit/core/error.h"
+#include "report_json.h"
+
+namespace ptmkit::fit {
+
+std::string_view to_string(ModelRequest model) {
+  switch (model) {
+    case ModelRequest::kPtm:
+      return "ptm";
+    case ModelRequest::kHsh2:
+      return "hsh2";
+    case ModelRequest::kHsh3:
+      return "hsh3";
+    case ModelRequest::kHsh4:
+      return "hsh4";
+    case ModelRequest::kAuto:
+      return "auto";
+  }
+  return "?";
+}
+
+ModelRequest parse_model_request(std::string_view name) {
+  for (ModelRequest m : {ModelRequest::kPtm, ModelRequest::kHsh2, ModelRequest::kHsh3,
+                         ModelRequest::kHsh4, ModelRequest::kAuto}) {
+    if (name == to_string(m)) return m;
+  }
+  throw Error("unknown model '" + std::string(name) + "' (known: ptm, auto, hsh2, hsh3, hsh4)");
+}
+
+CoefficientFormat format_for(Basis basis) {
+  return basis == Basis::kPtm ? CoefficientFormat::kPtm : CoefficientFormat::kRti;
+}
+
+std::string_view extension(CoefficientFormat format) {
+  return format == CoefficientFormat::kPtm ? ".ptm" : ".rti";
+}
+
+namespace {
+
+Basis requested_basis(ModelRequest model) {
+  switch (model) {
+    case ModelRequest::kHsh2:
+      return Basis::kHsh2;
+    case ModelRequest::kHsh3:
+      return Basis::kHsh3;
+    case ModelRequest::kHsh4:
+      return Basis::kHsh4;
+    default:
+      return Basis::kPtm;
+  }
+}
+
+}  // namespace
+
+FitPlan plan_fit(const LightSet& lights, const FitRequest& request) {
+  FitPlan plan;
+  plan.options = request.options;
+  if (request.model != ModelRequest::kPtm && request.options.near.plane) {
+    throw Error("--plane and --lights-json (near lights) work with --model ptm only so far");
+  }
+  Basis basis = requested_basis(request.model);
+  if (request.model == ModelRequest::kAuto) {
+    ModelSelectOptions sel;
+    sel.design = request.options.design;
+    if (request.colour_given) sel.colours = {request.options.model};
+    plan.selection = select_model(lights, sel);
+    basis = plan.selection->choice().basis;
+    plan.options.model = plan.selection->choice().colour;
+  }
+  plan.options.basis = basis;
+  plan.format = format_for(basis);
+  const std::string want(extension(plan.format));
+  if (request.output.extension() != want) {
+    if (request.model == ModelRequest::kPtm) {
+      throw Error(request.output.string() + ": the output must be a .ptm file");
+    }
+    throw Error(request.output.string() + ": the " + std::string(to_string(basis)) +
+                " model is written as a " + want + " file: use -o NAME" + want);
+  }
+  if (basis != Basis::kPtm) {
+    if (!is_shared_solver(plan.options.solver)) {
+      throw Error("--solver " + std::string(to_string(plan.options.solver)) +
+                  " is only available with the ptm model");
+    }
+    if (request.wants_maps) {
+      throw Error(
+          "--residual-map, --outlier-map, --normals, --albedo and --labels go with the "
+          "ptm model");
+    }
+  }
+  return plan;
+}
+
+void attach_light_positions(LightSet* lights, const LightSet& positioned,
+                            const std::string& source) {
+  if (positioned.size() != lights->size()) {
+    throw Error(source + ": " + std::to_string(positioned.size()) +
+                " lights but the light file has " + std::to_string(lights->size()));
+  }
+  for (std::size_t i = 0; i < positioned.size(); ++i) {
+    const Light& j = positioned.lights[i];
+    Light& l = lights->lights[i];
+    if (j.image.filename() != l.image.filename()) {
+      throw Error(source + ": light " + std::to_string(i + 1) + " is " +
+                  j.image.filename().string() + " but the light file's is " +
+                  l.image.filename().string());
+    }
+    if (!j.position_mm) {
+      throw Error(source + ": light " + std::to_string(i + 1) +
+                  " has no position_mm (directions only describe distant lights; give "
+                  "\"radius_mm\" or each light's \"position_mm\")");
+    }
+    l.position_mm = j.position_mm;
+  }
+}
+
+std::string FitRunReport::to_json() const {
+  nlohmann::json j = internal::fit_report_json(fit);
+  j["input"] = std::filesystem::absolute(input).lexically_normal().string();
+  j["output"] = std::filesystem::absolute(output).lexically_normal().string();
+  if (selection) j["model_selection"] = nlohmann::json::parse(selection->to_json());
+  nlohmann::json q = {{"file_bytes", written.file_bytes},
+                      {"max_coeff_error", written.max_coeff_error},
+                      {"rms_coeff_error", written.rms_coeff_error}};
+  if (written.relit_mean_abs_grey) q["relit_mean_abs_grey"] = *written.relit_mean_abs_grey;
+  if (written.relit_max_abs_grey) q["relit_max_abs_grey"] = *written.relit_max_abs_grey;
+  if (written.relit_psnr_db) {
+    q["relit_psnr_db"] = std::isfinite(*written.relit_psnr_db)
+                             ? nlohmann::json(*written.relit_psnr_db)
+                             : nlohmann::json("inf");
+  }
+  j["quantisation"] = q;
+  return j.dump(2) + "\n";
+}
+
+std::string FitRunReport::brief() const {
+  std::string out = "fit: " + fit.brief() + "\n";
+  char line[512];
+  const NearLightReport& lm = fit.light_model;
+  if (lm.model == LightModel::kNear) {
+    std::snprintf(line, sizeof line,
+                  "near lights: per-texel directions (spread up to %.2f deg), fall-off "
+                  "%.3f..%.3f%s\n",
+                  lm.max_spread_deg, lm.min_falloff, lm.max_falloff,
+                  lm.falloff_corrected ? " corrected" : " not corrected");
+    out += line;
+  } else if (!lm.note.empty()) {
+    out += lm.note + "\n";
+  }
+  if (!is_shared_solver(fit.solver)) {
+    const double total = std::max<double>(1.0, static_cast<double>(fit.outliers.samples));
+    std::snprintf(line, sizeof line,
+                  "solver %s: %.2f%% samples shadow, %.2f%% highlight, %llu fallback texels\n",
+                  std::string(to_string(fit.solver)).c_str(),
+                  100.0 * static_cast<double>(fit.outliers.shadows) / total,
+                  100.0 * static_cast<double>(fit.outliers.highlights) / total,
+                  static_cast<unsigned long long>(fit.outliers.fallback_texels));
+    out += line;
+  }
+  if (written.relit_mean_abs_grey) {
+    std::snprintf(line, sizeof line,
+                  "wrote %s (%zu bytes; quantisation: relit mean %.3f, max %.3f grey levels)\n",
+                  output.string().c_str(), written.file_bytes, *written.relit_mean_abs_grey,
+                  written.relit_max_abs_grey.value_or(0.0));
+  } else {
+    std::snprintf(line, sizeof line, "wrote %s (%zu bytes)\n", output.string().c_str(),
+                  written.file_bytes);
+  }
+  out += line;
+  return out;
+}
+
+}  // namespace ptmkit::fit
