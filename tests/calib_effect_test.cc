@@ -5,7 +5,7 @@
 
 #include <gtest/gtest.h>
 
-#include "../bench/calibration_study.h"
+#include "calibration_study.h"
 
 namespace ptmkit {
 namespace {
