@@ -7,7 +7,6 @@
 
 #include "commands.h"
 #include "progress.h"
-#include "ptmkit/calib/dome.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
@@ -44,32 +43,6 @@ struct FitArgs {
   std::string lights_json;  // near lights: positions (--lights-json)
   std::string plane;        // near lights: sample plane (--plane)
 };
-
-// Near lights: the positions of a lights JSON (calib's format: `ptmkit calibrate dome
-// --radius`, `ptmkit synth --dome-radius`) onto the .lp's lights, matched in order; the
-// image names must agree.
-void attach_light_positions(LightSet* lights, const std::string& json_path) {
-  const LightSet json = calib::read_dome_json(json_path);
-  if (json.size() != lights->size()) {
-    throw Error(json_path + ": " + std::to_string(json.size()) + " lights but the light file has " +
-                std::to_string(lights->size()));
-  }
-  for (std::size_t i = 0; i < json.size(); ++i) {
-    const Light& j = json.lights[i];
-    Light& l = lights->lights[i];
-    if (j.image.filename() != l.image.filename()) {
-      throw Error(json_path + ": light " + std::to_string(i + 1) + " is " +
-                  j.image.filename().string() + " but the light file's is " +
-                  l.image.filename().string());
-    }
-    if (!j.position_mm) {
-      throw Error(json_path + ": light " + std::to_string(i + 1) +
-                  " has no position_mm (directions only describe distant lights; give "
-                  "\"radius_mm\" or each light's \"position_mm\")");
-    }
-    l.position_mm = j.position_mm;
-  }
-}
 
 // Checks an output map's extension before the fit runs (no work lost on a typo).
 void check_map_path(const std::string& path, const char* flag, bool png_ok) {
