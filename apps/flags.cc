@@ -40,6 +40,20 @@ Eigen::Vector2d parse_vector2(const std::string& text, const std::string& flag) 
   return {v[0], v[1]};
 }
 
+std::array<int, 4> parse_box(const std::string& text, const std::string& flag) {
+  const auto v = parse_numbers(text, flag, 4, "x,y,w,h");
+  std::array<int, 4> box{};
+  for (int i = 0; i < 4; ++i) {
+    if (v[i] != std::floor(v[i]) || std::abs(v[i]) > 1e9) {
+      throw Error(flag + " '" + text + "': expected whole pixels x,y,w,h");
+    }
+    box[i] = static_cast<int>(v[i]);
+  }
+  if (box[2] <= 0 || box[3] <= 0)
+    throw Error(flag + " '" + text + "': width and height must be > 0");
+  return box;
+}
+
 std::vector<std::string> parse_list(const std::string& text, const std::string& flag) {
   std::vector<std::string> out;
   std::size_t a = 0;

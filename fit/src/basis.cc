@@ -52,8 +52,6 @@ int basis_terms(Basis basis) {
   return 0;
 }
 
-bool is_hsh(Basis basis) { return basis != Basis::kPtm; }
-
 std::vector<Basis> all_bases() { return {Basis::kHsh2, Basis::kPtm, Basis::kHsh3, Basis::kHsh4}; }
 
 void evaluate_basis(Basis basis, const Eigen::Vector3d& dir, double* out) {

@@ -39,7 +39,6 @@ enum class Basis { kHsh2, kPtm, kHsh3, kHsh4 };
 // Throws ptmkit::Error listing the known names for an unknown one.
 [[nodiscard]] Basis parse_basis(std::string_view name);
 [[nodiscard]] int basis_terms(Basis basis);
-[[nodiscard]] bool is_hsh(Basis basis);
 // Every basis, fewest terms first.
 [[nodiscard]] std::vector<Basis> all_bases();
 
