@@ -2,8 +2,10 @@
 #include <cstdio>
 #include <memory>
 
+#include <array>
+
 #include "commands.h"
-#include "progress.h"
+#include "flags.h"
 #include "ptmkit/calib/camera.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
@@ -29,7 +31,7 @@ struct DomeArgs {
 void run_dome(const DomeArgs& args) {
   const LightSet lights = calib::dome_light_set(args.options);
   write_lp(args.output, lights);
-  if (!args.json.empty()) calib::write_light_set_json(args.json, lights);
+  if (!args.json.empty()) write_light_json(args.json, lights);
   double min_el = 90.0, max_el = 0.0;
   for (const auto& l : lights.lights) {
     min_el = std::min(min_el, elevation_deg(l.direction));
@@ -70,16 +72,6 @@ struct SphereArgs {
   calib::SphereOptions options;
 };
 
-calib::PixelBox parse_box(const std::string& text) {
-  int v[4];
-  char tail = 0;
-  if (std::sscanf(text.c_str(), "%d,%d,%d,%d%c", &v[0], &v[1], &v[2], &v[3], &tail) != 4) {
-    throw Error("--roi " + text + ": expected x,y,w,h in pixels");
-  }
-  if (v[2] <= 0 || v[3] <= 0) throw Error("--roi " + text + ": width and height must be > 0");
-  return {v[0], v[1], v[2], v[3]};
-}
-
 // Overlays one image at a time (never the whole stack), downscaled unless asked otherwise.
 void write_overlays(const SphereArgs& args, const std::vector<std::filesystem::path>& files,
                     const calib::RigReport& report) {
@@ -108,8 +100,7 @@ void run_sphere(const SphereArgs& args) {
     throw Error("give the sphere either by --sphere or by --mask, not both");
   }
   for (const std::string& text : args.spheres) {
-    double v[3];
-    parse_vector3(text, "--sphere", v);
+    const Eigen::Vector3d v = parse_vector3(text, "--sphere");
     calib::Circle c;
     c.centre_px = {v[0], v[1]};
     c.radius_px = v[2];
@@ -118,38 +109,31 @@ void run_sphere(const SphereArgs& args) {
   if (!args.mask.empty()) {
     options.spheres.push_back(calib::circle_from_mask(read_image(args.mask).view()));
   }
-  if (!args.principal.empty()) {
-    double v[3] = {0, 0, 0};
-    parse_vector3(args.principal + ",0", "--principal", v);
-    options.detection.camera.principal_px = Eigen::Vector2d(v[0], v[1]);
-  }
   if (!args.plane.empty()) options.plane = read_plane_json(args.plane);
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
   const ImageInfo first = probe_image(files.front());
-  const int given = (args.camera.empty() ? 0 : 1) + (args.focal_mm > 0.0 ? 1 : 0) +
-                    (options.detection.camera.focal_px > 0.0 ? 1 : 0);
-  if (given > 1) throw Error("give the focal length once: --camera, --focal-mm or --focal-px");
-  if (!args.camera.empty()) {
-    const calib::SphereCamera cam = calib::sphere_camera(calib::read_camera_json(args.camera),
-                                                         first.width, first.height, args.camera);
-    options.detection.camera.focal_px = cam.focal_px;
-    if (args.principal.empty()) options.detection.camera.principal_px = cam.principal_px;
-  }
-  if (args.focal_mm > 0.0) {
-    if (!(args.sensor_width_mm > 0.0)) {
-      throw Error("--focal-mm needs --sensor-width-mm (the sensor's width in mm)");
-    }
-    options.detection.camera.focal_px =
-        calib::focal_px_from_lens(args.focal_mm, args.sensor_width_mm, first.width);
+  calib::CameraSource camera;
+  camera.camera_json = args.camera;
+  camera.focal_mm = args.focal_mm;
+  camera.sensor_width_mm = args.sensor_width_mm;
+  camera.focal_px = options.detection.camera.focal_px;
+  if (!args.principal.empty()) camera.principal_px = parse_vector2(args.principal, "--principal");
+  try {
+    options.detection.camera = calib::resolve_sphere_camera(camera, first.width, first.height);
+  } catch (const Error& e) {
+    throw Error(std::string(e.what()) +
+                " (--camera, --focal-mm with --sensor-width-mm, --focal-px)");
   }
   calib::StackCalibrationOptions stack_options;
   stack_options.rig = options;
-  for (const std::string& r : args.rois) stack_options.search.rois.push_back(parse_box(r));
+  for (const std::string& r : args.rois) {
+    const std::array<int, 4> box = parse_box(r, "--roi");
+    stack_options.search.rois.push_back({box[0], box[1], box[2], box[3]});
+  }
   if (!args.radius_range.empty()) {
-    double lo = 0.0, hi = 0.0;
-    char tail = 0;
-    if (std::sscanf(args.radius_range.c_str(), "%lf,%lf%c", &lo, &hi, &tail) != 2 ||
-        !(lo >= 0.0 && hi >= lo && hi > 0.0)) {
+    const Eigen::Vector2d range = parse_vector2(args.radius_range, "--radius-range");
+    const double lo = range.x(), hi = range.y();
+    if (!(lo >= 0.0 && hi >= lo && hi > 0.0)) {
       throw Error("--radius-range " + args.radius_range +
                   ": expected MIN,MAX in pixels with 0 <= MIN <= MAX");
     }
@@ -190,7 +174,7 @@ void run_sphere(const SphereArgs& args) {
     throw Error("no image has a usable highlight on the sphere (see the flags with --report)");
   }
   write_lp(args.output, lights);
-  if (!args.json.empty()) calib::write_light_set_json(args.json, lights);
+  if (!args.json.empty()) write_light_json(args.json, lights);
   if (!args.report.empty()) write_file_atomic(args.report, result.to_json() + "\n");
   if (!args.overlays.empty()) write_overlays(args, files, report);
   if (!args.plot.empty()) {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "commands.h"
-#include "progress.h"
+#include "flags.h"
 #include "ptmkit/calib/apriltag.h"
 #include "ptmkit/calib/camera.h"
 #include "ptmkit/core/atomic_file.h"
@@ -68,9 +68,7 @@ void run_plane(const PlaneArgs& args) {
   calib::PlaneOptions options = args.options;
   if (!args.family.empty()) options.family = calib::parse_tag_family(args.family);
   if (!args.origin.empty()) {
-    double v[3] = {0, 0, 0};
-    parse_vector3(args.origin + ",0", "--origin", v);
-    options.origin_mm = {v[0], v[1]};
+    options.origin_mm = parse_vector2(args.origin, "--origin");
   }
   const Image image = read_image(args.image);
   calib::PlaneReport report;

@@ -9,8 +9,9 @@
 #include <vector>
 
 #include "commands.h"
+#include "flags.h"
 #include "ptmkit/core/error.h"
-#include "ptmkit/fit/compare.h"
+#include "ptmkit/eval/compare.h"
 
 namespace ptmkit::app {
 
@@ -22,31 +23,24 @@ struct CompareArgs {
   std::string output;
   std::string solvers = "ls,robust";
   std::string format = "rgb";
-  fit::CompareOptions options;
+  eval::CompareOptions options;
 };
 
 std::vector<fit::Solver> parse_solver_list(const std::string& list) {
   std::vector<fit::Solver> out;
-  std::size_t a = 0;
-  while (a <= list.size()) {
-    std::size_t b = list.find(',', a);
-    if (b == std::string::npos) b = list.size();
-    const std::string name = list.substr(a, b - a);
-    if (name.empty()) throw Error("--solvers: empty name in '" + list + "'");
+  for (const std::string& name : parse_list(list, "--solvers"))
     out.push_back(fit::parse_solver(name));
-    a = b + 1;
-  }
   return out;
 }
 
 void run_compare(const CompareArgs& args) {
-  fit::CompareOptions options = args.options;
+  eval::CompareOptions options = args.options;
   options.solvers = parse_solver_list(args.solvers);
   options.model = parse_colour_model(args.format);
   std::optional<std::filesystem::path> test;
   if (!args.test.empty()) test = args.test;
-  const fit::CompareReport report = fit::compare_solvers(args.capture, test, options);
-  fit::write_compare(report, args.output);
+  const eval::CompareReport report = eval::compare_solvers(args.capture, test, options);
+  eval::write_compare(report, args.output);
   std::printf("compare: %dx%d, %d lights, held out: %s\n", report.width, report.height,
               report.lights,
               report.folds > 0 ? (std::to_string(report.folds) + " folds").c_str()

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "commands.h"
+#include "flags.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/texture/direct.h"
@@ -29,10 +30,7 @@ void add_direct_command(CLI::App& root) {
       ->required();
   cmd->add_option("-o,--output", a->output, "Output image (written atomically)")->required();
   cmd->callback([a] {
-    Eigen::Vector3d v;
-    char extra = 0;
-    if (std::sscanf(a->light.c_str(), "%lf,%lf,%lf%c", &v[0], &v[1], &v[2], &extra) != 3)
-      throw Error("--light '" + a->light + "': expected three numbers x,y,z");
+    const Eigen::Vector3d v = parse_vector3(a->light, "--light");
     const LightSet set = read_lp(a->lights);
     const texture::DirectReport r = texture::direct_from_light_set(set, v, a->output);
     const auto& w = r.weights;

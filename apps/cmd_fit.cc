@@ -5,7 +5,6 @@
 
 #include "commands.h"
 #include "progress.h"
-#include "ptmkit/calib/dome.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "flags.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
@@ -39,27 +40,6 @@ struct RelightArgs {
   bool integer = false;
 };
 
-// "x,y,z" -> vector. NaN and infinity parse (and are rejected by the library with the rest).
-Eigen::Vector3d parse_light(const std::string& text) {
-  Eigen::Vector3d v;
-  std::size_t start = 0;
-  for (int i = 0; i < 3; ++i) {
-    const std::size_t comma = text.find(',', start);
-    const bool last = i == 2;
-    if (last != (comma == std::string::npos)) {
-      throw Error("--light '" + text + "': expected three numbers x,y,z");
-    }
-    const std::string item = text.substr(start, last ? std::string::npos : comma - start);
-    char* end = nullptr;
-    v[i] = std::strtod(item.c_str(), &end);
-    if (item.empty() || end != item.c_str() + item.size()) {
-      throw Error("--light '" + text + "': '" + item + "' is not a number");
-    }
-    start = comma + 1;
-  }
-  return v;
-}
-
 void run_relight(const RelightArgs& args) {
   const bool one = !args.light.empty();
   if (one == !args.lights.empty()) {
@@ -89,7 +69,7 @@ void run_relight(const RelightArgs& args) {
   write.format = args.bits == 16 ? PixelFormat::kU16 : PixelFormat::kU8;
 
   if (one) {
-    Eigen::Vector3d dir = parse_light(args.light);
+    Eigen::Vector3d dir = parse_vector3(args.light, "--light");
     try {
       dir = texture::normalised_light(dir);
     } catch (const Error& e) {

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "commands.h"
+#include "flags.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/texture/ptm.h"
@@ -13,15 +14,6 @@
 namespace ptmkit::app {
 
 namespace {
-
-Eigen::Vector3d parse_vec3(const std::string& text, const char* flag) {
-  Eigen::Vector3d v;
-  char extra = 0;
-  if (std::sscanf(text.c_str(), "%lf,%lf,%lf%c", &v[0], &v[1], &v[2], &extra) != 3) {
-    throw Error(std::string(flag) + " '" + text + "': expected three numbers x,y,z");
-  }
-  return v;
-}
 
 struct RenderArgs {
   std::string input, output, geometry = "plane", light = "0,0,1", camera = "0,0,3",
@@ -35,9 +27,9 @@ struct RenderArgs {
 void run_render(const RenderArgs& a) {
   texture::RenderOptions o;
   o.geometry = texture::parse_geometry(a.geometry);
-  o.light_dir = parse_vec3(a.light, "--light");
-  o.camera.position = parse_vec3(a.camera, "--camera");
-  o.camera.target = parse_vec3(a.target, "--target");
+  o.light_dir = parse_vector3(a.light, "--light");
+  o.camera.position = parse_vector3(a.camera, "--camera");
+  o.camera.target = parse_vector3(a.target, "--target");
   o.camera.fov_y_deg = a.fov;
   o.camera.ortho_height = a.ortho_height;
   o.camera.width = a.width;

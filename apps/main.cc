@@ -9,6 +9,7 @@
 #include "commands.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/version.h"
 
 namespace {
 constexpr const char* kExitCodes =
@@ -24,7 +25,7 @@ int main(int argc, char** argv) {
       "ptmkit"};
   app.footer(kExitCodes);
   app.require_subcommand(1);
-  app.set_version_flag("--version", "ptmkit 0.1.0");
+  app.set_version_flag("--version", std::string("ptmkit ") + ptmkit::kVersion);
   ptmkit::app::add_synth_command(app);
   ptmkit::app::add_fit_command(app);
   ptmkit::app::add_relight_command(app);

@@ -28,23 +28,4 @@ ProgressFn make_progress(const std::string& label) {
   };
 }
 
-void parse_vector3(const std::string& text, const std::string& flag, double out[3]) {
-  std::stringstream ss(text);
-  std::string part;
-  std::vector<double> values;
-  while (std::getline(ss, part, ',')) {
-    char* end = nullptr;
-    const double v = std::strtod(part.c_str(), &end);
-    if (end == part.c_str() || *end != '\0') {
-      throw Error(flag + " '" + text + "': expected three numbers x,y,z");
-    }
-    values.push_back(v);
-  }
-  if (values.size() != 3) throw Error(flag + " '" + text + "': expected three numbers x,y,z");
-  for (int i = 0; i < 3; ++i) {
-    if (!std::isfinite(values[i])) throw Error(flag + " '" + text + "': not a finite vector");
-    out[i] = values[i];
-  }
-}
-
 }  // namespace ptmkit::app

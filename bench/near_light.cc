@@ -21,6 +21,7 @@
 #include <Eigen/Core>
 
 #include "ptmkit/core/coefficients.h"
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/core/parallel.h"
 #include "ptmkit/core/plane.h"
@@ -58,7 +59,7 @@ Error relight_error(const CoefficientMap& map, const std::vector<Image>& truth,
   Error e;
   const double mse = sum / static_cast<double>(abs_err.size());
   e.rms_grey = 255.0 * std::sqrt(mse);
-  e.psnr_db = 10.0 * std::log10(1.0 / mse);
+  e.psnr_db = ptmkit::psnr_db(mse);
   const auto p =
       abs_err.begin() + static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(abs_err.size()));
   std::nth_element(abs_err.begin(), p, abs_err.end());

@@ -14,14 +14,26 @@ if(PTMKIT_BUILD_BENCH)
   find_package(benchmark REQUIRED)
 endif()
 
-# Adds a stage library: ptmkit_stage(NAME SOURCES... DEPS ...)
+# Adds a stage library and installs it: ptmkit_stage(NAME SOURCES ... PUBLIC_DEPS ...
+# PRIVATE_DEPS ...). The target is ptmkit::NAME in the build and, after `cmake --install`,
+# in `find_package(ptmkit COMPONENTS NAME)` (cmake/ptmkitConfig.cmake.in lists what each
+# component needs).
 function(ptmkit_stage name)
   cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(ptmkit_${name} STATIC ${ARG_SOURCES})
   add_library(ptmkit::${name} ALIAS ptmkit_${name})
-  target_include_directories(ptmkit_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
+  set_target_properties(ptmkit_${name} PROPERTIES EXPORT_NAME ${name})
+  target_include_directories(ptmkit_${name} PUBLIC
+    $<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>
+    $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
   target_link_libraries(ptmkit_${name} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS}
-                        ptmkit_build_flags)
+                        $<BUILD_INTERFACE:ptmkit_build_flags>)
+  install(TARGETS ptmkit_${name} EXPORT ptmkit-${name}-targets
+          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+          LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+  install(DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  install(EXPORT ptmkit-${name}-targets NAMESPACE ptmkit::
+          DESTINATION ${PTMKIT_INSTALL_CMAKEDIR})
 endfunction()
 
 # libjpeg (texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).

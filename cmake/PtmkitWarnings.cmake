@@ -1,11 +1,10 @@
-# Warnings and sanitizers applied to every ptmkit target through one interface library.
+# Warnings and sanitizers applied to every ptmkit target through one interface library. It is
+# linked as $<BUILD_INTERFACE:...>: an installed ptmkit does not impose its warnings on users.
+# Floating-point contraction is set where results must be bit-exact (fit/CMakeLists.txt).
 add_library(ptmkit_build_flags INTERFACE)
 target_compile_options(ptmkit_build_flags INTERFACE
   -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion
-  -Wnon-virtual-dtor -Wold-style-cast -Woverloaded-virtual
-  # No implicit a * b + c -> fma: the kernels compiled for FMA must give the bits of the
-  # baseline ones (the 8-bit and float fit paths are tested to agree exactly).
-  -ffp-contract=off)
+  -Wnon-virtual-dtor -Wold-style-cast -Woverloaded-virtual)
 if(PTMKIT_NATIVE)
   target_compile_options(ptmkit_build_flags INTERFACE -march=native)
 endif()

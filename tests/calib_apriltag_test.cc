@@ -46,7 +46,7 @@ std::vector<Expected> read_expected(const fs::path& path) {
 }
 
 // The expected files were made at full resolution without edge refinement; the corner
-// tolerance is the issue's, 1.5 px (our luma comes from decoded RGB rather than the JPEG's Y
+// tolerance is the requirement's, 1.5 px (docs/TARGETS.md; our luma comes from decoded RGB rather than the JPEG's Y
 // plane, which moves corners by a fraction of a pixel).
 constexpr double kMaxCornerErrorPx = 1.5;
 

@@ -117,7 +117,7 @@ TEST(CalibDome, JsonWrittenWithPositionsReadsBack) {
   o.layout = "dome49";
   o.radius_mm = 450.0;
   const LightSet written = dome_light_set(o);
-  write_light_set_json(dir / "lights.json", written);
+  write_light_json(dir / "lights.json", written);
   const LightSet read = read_dome_json(dir / "lights.json");
   ASSERT_EQ(read.size(), written.size());
   for (std::size_t i = 0; i < read.size(); ++i) {

@@ -1,11 +1,11 @@
-// How light-calibration error carries into a fit (bench/calibration_study.h): a relief fitted
+// How light-calibration error carries into a fit (tests/support/calibration_study.h): a relief fitted
 // with lights calibrated from rendered sphere photographs relights like one fitted with the
 // true lights; deliberate errors move the relit values in proportion.
 #include <cstdio>
 
 #include <gtest/gtest.h>
 
-#include "../bench/calibration_study.h"
+#include "calibration_study.h"
 
 namespace ptmkit {
 namespace {

@@ -131,7 +131,7 @@ TEST(CalibSphereRefine, TwoSpheresTriangulateNearLightsWithinOnePercentOfTheDome
       "outline rms %.3f px, %d iterations; 1 degree light, noise 2 grey: mean %.3f max %.3f\n",
       clean.mean, clean.max, linear.mean, linear.max, noisy.mean, noisy.max, r.outline_rms_px,
       r.iterations, small.mean, small.max);
-  // The requirement: within 1% of the dome radius.
+  // Required: within 1% of the dome radius (docs/TARGETS.md).
   EXPECT_LT(clean.max, 1.0);
   EXPECT_LT(noisy.max, 1.0);
   // The spheres' centres come back (found, then refined on their outlines).

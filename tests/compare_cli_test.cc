@@ -1,4 +1,4 @@
-// `ptmkit compare` and fit::compare_solvers on small synthetic captures.
+// `ptmkit compare` and eval::compare_solvers on small synthetic captures.
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -8,14 +8,16 @@
 #include <nlohmann/json.hpp>
 
 #include "ptmkit/core/image_io.h"
-#include "ptmkit/fit/compare.h"
+#include "ptmkit/eval/compare.h"
 #include "ptmkit/synth/synth.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
 
-namespace ptmkit::fit {
+namespace ptmkit::eval {
 namespace {
+
+using fit::Solver;
 
 using test::list_files;
 using test::run_ptmkit;
@@ -69,7 +71,7 @@ TEST(CompareLibrary, FoldsAndTruthGiveSaneNumbers) {
   const SolverResult& ls = r.results[0];
   const SolverResult& robust = r.results[1];
   // The robust default rejects shadows and highlights: closer to the diffuse truth and
-  // better normals than least squares (issue 4 targets; measured margins are 2 dB and 3x).
+  // better normals than least squares (the robust targets of docs/TARGETS.md; measured margins are 2 dB and 3x).
   EXPECT_GT(robust.truth_psnr_db, ls.truth_psnr_db + 1.0);
   EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg);
   EXPECT_EQ(ls.shadow_fraction + ls.highlight_fraction, 0.0);
@@ -139,4 +141,4 @@ TEST(CompareCli, BadInputsExitOneAndWriteNothing) {
 }
 
 }  // namespace
-}  // namespace ptmkit::fit
+}  // namespace ptmkit::eval

@@ -12,6 +12,7 @@
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
+#include "ptmkit/core/light_set.h"
 #include "ptmkit/core/plane.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/synth/synth.h"
@@ -341,14 +342,21 @@ TEST(NearLightCli, SynthAndFitRoundTrip) {
 
   // Positions from a JSON without them, a fall-off without a plane: errors, never a silent
   // distant fit (the library-level cases are in NearLightFit.ClearErrors).
-  {
-    std::ofstream f(dir / "dirs.json");
-    f << R"({"layout": "icosa"})";
-  }
+  write_light_json(dir / "dirs.json", read_lp(lp));  // directions only
   r = test::run_ptmkit({"fit", lp, "-o", (dir / "b.ptm").string(), "--lights-json",
                         (dir / "dirs.json").string(), "--plane", out + "/plane.json"});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("has no position_mm"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "b.ptm"));
+  // A dome description is not a list of lights: refused, saying how to make one.
+  {
+    std::ofstream f(dir / "dome.json");
+    f << R"({"layout": "icosa", "radius_mm": 300})";
+  }
+  r = test::run_ptmkit({"fit", lp, "-o", (dir / "c.ptm").string(), "--lights-json",
+                        (dir / "dome.json").string(), "--plane", out + "/plane.json"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("calibrate dome"));
   r = test::run_ptmkit({"fit", lp, "-o", (dir / "d.ptm").string(), "--falloff"});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("fall-off correction needs"));

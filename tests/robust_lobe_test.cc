@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/Cholesky>
 
-#include "robust_util.h"
+#include "synth_stack.h"
 
 namespace ptmkit::fit {
 namespace {

@@ -11,7 +11,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_layout.h"
-#include "robust_util.h"
+#include "synth_stack.h"
 #include "test_util.h"
 
 using ::testing::HasSubstr;
@@ -23,8 +23,8 @@ constexpr int kSize = 64;  // pixels: the presets' relief scaled down, same scen
 
 struct PresetCase {
   const char* preset;
-  // Issue 4's target for the gain of the default robust solver over least squares, PSNR
-  // against the diffuse truth over lit samples (evaluate.h). Measured at 64 px: 3.22 / 0.87 /
+  // The required gain (docs/TARGETS.md) of the default robust solver over least squares, PSNR
+  // against the diffuse truth over lit samples (eval/truth.h). Measured at 64 px: 3.22 / 0.87 /
   // 5.99 / 4.48 / 3.22 dB.
   double min_gain_db;
 };
@@ -41,9 +41,9 @@ TEST_P(RobustPresets, BeatsLeastSquaresOnTheDiffuseTruthAndOnNormals) {
   const auto ls = test::score_solver(stack, Solver::kLS);
   const auto robust = test::score_solver(stack, Solver::kRobust);
   EXPECT_GE(robust.psnr_db - ls.psnr_db, c.min_gain_db) << c.preset;
-  // Normals from the inliers beat normals from every sample (issue 4: on every preset).
+  // Normals from the inliers beat normals from every sample (required on every preset).
   EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg) << c.preset;
-  // Samples more than 20 grey levels off the truth, labelled (issue 4: precision >= 0.8,
+  // Samples more than 20 grey levels off the truth, labelled (required: precision >= 0.8,
   // recall >= 0.6; measured at 64 px: precision 0.86-0.97, recall 0.78-1.00).
   if (robust.outliers_lit.true_outliers > 0) {
     EXPECT_GE(robust.outliers_lit.recall, 0.6) << c.preset;
@@ -230,7 +230,7 @@ TEST(RobustCli, FitsWithTheRobustSolverAndWritesMapsAndReport) {
   Image est = n, tru = truth;
   for (std::size_t i = 0; i < est.size(); ++i) est.data()[i] = 2 * est.data()[i] - 1;
   for (std::size_t i = 0; i < tru.size(); ++i) tru.data()[i] = 2 * tru.data()[i] - 1;
-  EXPECT_LT(normal_error(est, tru).mean_deg, 2.0);
+  EXPECT_LT(eval::normal_error(est, tru).mean_deg, 2.0);
 
   const auto bad = test::run_ptmkit({"fit", (dir.path() / "cap" / "lights.lp").string(), "-o",
                                      (dir / "o2.ptm").string(), "--solver", "nope"});

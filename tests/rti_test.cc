@@ -1,14 +1,16 @@
-// HSH .rti files: basis agreement between stages, write/read round trip, malformed files,
+// HSH .rti files: the basis against its general definition, write/read round trip, malformed files,
 // relighting (library and CLI).
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <string>
 
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/hsh.h"
 #include "ptmkit/fit/basis.h"
 #include "ptmkit/texture/relight.h"
 #include "ptmkit/texture/rti.h"
@@ -38,22 +40,76 @@ std::string read_bytes(const std::filesystem::path& p) {
   return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
 }
 
-TEST(RtiBasis, FitAndTextureStagesAgree) {
+// The closed forms of core/hsh.h against the general definition of the hemispherical
+// harmonics: H_l^m(theta, phi) = K_l^m P_l^|m|(2 cos theta - 1) times 1 (m = 0),
+// sqrt(2) cos(m phi) (m > 0) or sqrt(2) sin(|m| phi) (m < 0), with
+// K_l^m = sqrt((2l + 1) / (2 pi) (l - |m|)! / (l + |m|)!) and P the associated Legendre
+// functions (std::assoc_legendre, without the Condon-Shortley phase). The .rti order puts
+// cos(m phi) at index l^2 + l - m and sin(m phi) at l^2 + l + m, and the viewers' convention
+// flips the sign of the m = 2 terms.
+double hsh_reference(int index, double theta, double phi) {
+  int l = 0;
+  while ((l + 1) * (l + 1) <= index) ++l;
+  const int k = index - l * l - l;  // -l .. l: negative for cos(|k| phi), positive for sin
+  const int m = std::abs(k);
+  double fact = 1.0;  // (l - m)! / (l + m)!
+  for (int i = l - m + 1; i <= l + m; ++i) fact /= i;
+  const double pi = std::numbers::pi;
+  const double kn = std::sqrt((2 * l + 1) / (2 * pi) * fact);
+  const double p = std::assoc_legendre(static_cast<unsigned>(l), static_cast<unsigned>(m),
+                                       2 * std::cos(theta) - 1);
+  if (m == 0) return kn * p;
+  const double sign = m == 2 ? -1.0 : 1.0;
+  const double angular = k < 0 ? std::cos(m * phi) : std::sin(m * phi);
+  return sign * std::sqrt(2.0) * kn * p * angular;
+}
+
+TEST(RtiBasis, ClosedFormsMatchTheGeneralDefinition) {
+  // Both sides are a few dozen double operations on values of order 1: agreement to 1e-12 is
+  // rounding; a wrong constant, power or sign is off by far more.
+  constexpr double kRoundingTol = 1e-12;
+  // Below the viewers' clamp of theta (pi/2 - 0.04), where the closed forms are unclamped.
+  constexpr double kMaxThetaRad = std::numbers::pi / 2 - 0.05;
   std::mt19937_64 rng(test::test_seed());
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_real_distribution<double> ut(0.0, kMaxThetaRad);
+  std::uniform_real_distribution<double> up(-std::numbers::pi, std::numbers::pi);
   for (int i = 0; i < 200; ++i) {
-    Eigen::Vector3d d(u(rng), u(rng), std::abs(u(rng)) + 0.01);
-    d.normalize();
-    for (int order = 2; order <= 4; ++order) {
-      const int t = texture::hsh_terms(order);
-      double a[16], b[16];
-      texture::hsh_basis(t, d, a);
-      const fit::Basis basis = order == 2   ? fit::Basis::kHsh2
-                               : order == 3 ? fit::Basis::kHsh3
-                                            : fit::Basis::kHsh4;
-      fit::evaluate_basis(basis, d, b);
-      for (int k = 0; k < t; ++k) EXPECT_NEAR(a[k], b[k], 1e-12) << "term " << k;
+    const double theta = ut(rng), phi = up(rng);
+    const Eigen::Vector3d d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
+                            std::cos(theta));
+    double h[16];
+    hsh_basis(16, d, h);
+    for (int k = 0; k < 16; ++k)
+      EXPECT_NEAR(h[k], hsh_reference(k, theta, phi), kRoundingTol) << "term " << k;
+    // Fewer terms are a prefix of the 16.
+    double h4[4], h9[9];
+    hsh_basis(4, d, h4);
+    hsh_basis(9, d, h9);
+    for (int k = 0; k < 4; ++k) EXPECT_EQ(h4[k], h[k]);
+    for (int k = 0; k < 9; ++k) EXPECT_EQ(h9[k], h[k]);
+  }
+  // At and below the horizon theta is clamped: the values of theta = pi/2 - 0.04.
+  const double clamp = std::numbers::pi / 2 - 0.04;
+  for (double phi : {0.3, 2.0, -2.5}) {
+    double at[16], below[16], edge[16];
+    hsh_basis(16, Eigen::Vector3d(std::cos(phi), std::sin(phi), 0.0), at);
+    hsh_basis(16, Eigen::Vector3d(std::cos(phi), std::sin(phi), -0.2), below);
+    hsh_basis(16,
+              Eigen::Vector3d(std::sin(clamp) * std::cos(phi), std::sin(clamp) * std::sin(phi),
+                              std::cos(clamp)),
+              edge);
+    for (int k = 0; k < 16; ++k) {
+      EXPECT_NEAR(at[k], edge[k], kRoundingTol) << "term " << k;
+      EXPECT_NEAR(below[k], edge[k], kRoundingTol) << "term " << k;
     }
+  }
+  // The fit evaluates the .rti basis (the viewers' order): a basis name maps to its terms.
+  for (const fit::Basis b : {fit::Basis::kHsh2, fit::Basis::kHsh3, fit::Basis::kHsh4}) {
+    double a[16], f[16];
+    const Eigen::Vector3d d(0.3, -0.4, 0.8);
+    hsh_basis(fit::basis_terms(b), d, a);
+    fit::evaluate_basis(b, d, f);
+    for (int k = 0; k < fit::basis_terms(b); ++k) EXPECT_EQ(a[k], f[k]) << "term " << k;
   }
   // Overhead light: only the zonal terms (h0, h2, h6, h12) are non-zero, at their c = 1 values.
   double h[16];

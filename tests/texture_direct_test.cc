@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
@@ -80,7 +81,21 @@ TEST(TextureDirect, DegenerateLayoutsAreRefused) {
 }
 
 // The docs/TEXTURE.md comparison (slow-ish: run with --gtest_also_run_disabled_tests).
-TEST(TextureDirect, DISABLED_HeldOutReport) {
+// Held-out lights, against the noise-free render (docs/TEXTURE.md, "Held-out comparison"):
+// direct rendering from the photographs beats the polynomial, whose approximation error
+// (highlights, shadows) dominates; 8-bit storage costs nothing measurable and the integer
+// model's shifts a little. Measured: direct 29.14, float 25.39, .ptm 25.39, integer 25.27 dB.
+TEST(TextureDirect, HeldOutRanksDirectAbovePolynomialAboveIntegerModel) {
+  // Direct rendering keeps the highlights and shadows of the nearest photographs: 3.75 dB
+  // measured; a third of that margin would still say the polynomial is the limit.
+  constexpr double kMinDirectGainDb = 1.25;
+  // 8-bit scale/bias storage of these coefficients: 0.00 dB measured; its step (1/255 of the
+  // coefficient range) is far below the polynomial's own misfit.
+  constexpr double kMaxStorageLossDb = 0.05;
+  // The paper's shifts quantise coarser (steps of 2-4 grey units here): 0.12 dB measured.
+  constexpr double kMaxIntegerLossDb = 0.3;
+  // Sanity floor for the polynomial itself (25.39 dB measured).
+  constexpr double kMinPolynomialDb = 24.0;
   synth::SynthOptions so = synth::preset_options("default");
   so.width = so.height = 128;
   const synth::Scene scene = synth::build_scene(so);
@@ -118,6 +133,11 @@ TEST(TextureDirect, DISABLED_HeldOutReport) {
   for (int m = 0; m < 4; ++m)
     std::printf("  %-32s %6.2f dB  %4d bytes/texel\n", names[m], sums[m] / n, bytes[m]);
   std::printf("  integer shifts (%d, %d, %d)\n", t8.shifts[0], t8.shifts[1], t8.shifts[2]);
+  const double direct = sums[0] / n, poly = sums[1] / n, ptm = sums[2] / n, integer = sums[3] / n;
+  EXPECT_GT(poly, kMinPolynomialDb);
+  EXPECT_GT(direct - poly, kMinDirectGainDb);
+  EXPECT_LT(std::abs(poly - ptm), kMaxStorageLossDb);
+  EXPECT_LT(ptm - integer, kMaxIntegerLossDb);
 }
 
 }  // namespace

@@ -159,6 +159,29 @@ SphereCamera sphere_camera(const CameraIntrinsics& camera, int width_px, int hei
   return out;
 }
 
+SphereCamera resolve_sphere_camera(const CameraSource& source, int width_px, int height_px) {
+  const int given = (source.camera_json.empty() ? 0 : 1) + (source.focal_mm > 0.0 ? 1 : 0) +
+                    (source.focal_px > 0.0 ? 1 : 0);
+  if (given > 1) {
+    throw Error(
+        "give the focal length once: a camera file, a lens in mm or a focal length in pixels");
+  }
+  SphereCamera cam;
+  if (!source.camera_json.empty()) {
+    cam = sphere_camera(read_camera_json(source.camera_json), width_px, height_px,
+                        source.camera_json);
+  } else if (source.focal_mm > 0.0) {
+    if (!(source.sensor_width_mm > 0.0)) {
+      throw Error("a lens focal length in mm needs the sensor's width in mm");
+    }
+    cam.focal_px = focal_px_from_lens(source.focal_mm, source.sensor_width_mm, width_px);
+  } else {
+    cam.focal_px = source.focal_px;
+  }
+  if (source.principal_px) cam.principal_px = source.principal_px;
+  return cam;
+}
+
 double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px) {
   if (!(focal_mm > 0.0) || !(sensor_width_mm > 0.0) || !std::isfinite(focal_mm) ||
       !std::isfinite(sensor_width_mm)) {

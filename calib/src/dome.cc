@@ -7,11 +7,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/json_file.h"
 #include "ptmkit/core/light_layout.h"
-#include "ptmkit/core/limits.h"
 
 namespace ptmkit::calib {
 
@@ -33,20 +31,6 @@ std::vector<Eigen::Vector3d> layout_directions(std::string_view spec) {
               "' (expected icosa, geodesic:F, dome49, rings:SPEC or a .lp file)");
 }
 
-LightSet layout_light_set(std::string_view spec, const std::string& name_pattern) {
-  LightSet set;
-  const auto dirs = layout_directions(spec);
-  for (std::size_t i = 0; i < dirs.size(); ++i) {
-    char name[512];
-    std::snprintf(name, sizeof(name), name_pattern.c_str(), static_cast<int>(i + 1));
-    Light l;
-    l.image = name;
-    l.direction = dirs[i];
-    set.lights.push_back(std::move(l));
-  }
-  return set;
-}
-
 }  // namespace ptmkit::calib
 
 namespace ptmkit::calib {
@@ -63,16 +47,6 @@ std::string image_name(const std::string& pattern, std::size_t index) {
   char name[512];
   std::snprintf(name, sizeof(name), pattern.c_str(), static_cast<int>(index + 1));
   return name;
-}
-
-Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& what) {
-  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() ||
-      !j[2].is_number()) {
-    throw Error(what + " must be an array of three numbers");
-  }
-  Eigen::Vector3d v(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
-  if (!v.allFinite()) throw Error(what + " is not finite");
-  return v;
 }
 
 // Fills direction (and position) of a light, checking it is above the plane.
@@ -141,67 +115,12 @@ LightSet read_dome_json(const std::filesystem::path& path, const DomeOptions& de
       throw Error(where(path) + ": " + e.what());
     }
   }
-  const auto& lights = j["lights"];
-  if (!lights.is_array() || lights.empty()) {
-    throw Error(where(path) + ": \"lights\" must be a non-empty array");
-  }
-  if (static_cast<long long>(lights.size()) > kMaxLights) {
-    throw Error(where(path) + ": " + std::to_string(lights.size()) + " lights, more than the " +
-                std::to_string(kMaxLights) + " allowed");
-  }
-  LightSet set;
-  set.source = path;
-  const std::filesystem::path base = path.has_parent_path() ? path.parent_path() : ".";
-  for (std::size_t i = 0; i < lights.size(); ++i) {
-    const std::string what = where(path) + ": light " + std::to_string(i + 1);
-    const auto& e = lights[i];
-    if (!e.is_object()) throw Error(what + ": expected an object");
-    Light l;
-    l.image = e.contains("image") && e["image"].is_string()
-                  ? (base / e["image"].get<std::string>()).lexically_normal()
-                  : std::filesystem::path(image_name(o.name_pattern, i));
-    const bool has_dir = e.contains("direction");
-    const bool has_pos = e.contains("position_mm");
-    if (!has_dir && !has_pos) throw Error(what + ": give a direction or position_mm");
-    place(&l, vec3(has_pos ? e["position_mm"] : e["direction"], what), has_pos, o.radius_mm,
-          o.yaw_deg, what);
-    if (has_dir && has_pos) {
-      // Both (as write_light_set_json writes them): the position rules; the direction must be
-      // the one toward it from the plane centre.
-      const Eigen::Vector3d d = vec3(e["direction"], what);
-      if (d.norm() < 1e-12 ||
-          rotate_yaw(d, o.yaw_deg).normalized().dot(l.direction) < std::cos(0.01)) {
-        throw Error(what + ": direction does not point at position_mm from the plane centre");
-      }
-    }
-    if (e.contains("intensity")) {
-      if (!e["intensity"].is_number() || !(e["intensity"].get<double>() > 0.0)) {
-        throw Error(what + ": intensity must be a positive number");
-      }
-      l.intensity = e["intensity"].get<double>();
-    }
-    set.lights.push_back(std::move(l));
-  }
-  return set;
-}
-
-void write_light_set_json(const std::filesystem::path& path, const LightSet& lights) {
-  nlohmann::json j;
-  j["frame"] = "light frame: x right, y toward the image top, z toward the camera; mm";
-  j["lights"] = nlohmann::json::array();
-  const auto base = std::filesystem::absolute(path).parent_path();
-  for (const Light& l : lights.lights) {
-    nlohmann::json e;
-    std::filesystem::path name = l.image;
-    if (name.is_absolute()) name = name.lexically_relative(base);
-    e["image"] = name.generic_string();
-    e["direction"] = {l.direction.x(), l.direction.y(), l.direction.z()};
-    if (l.position_mm)
-      e["position_mm"] = {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()};
-    e["intensity"] = l.intensity;
-    j["lights"].push_back(e);
-  }
-  write_file_atomic(path, j.dump(2) + "\n");
+  // The lights themselves: the light JSON, one reader in core.
+  LightJsonReadOptions lo;
+  lo.name_pattern = o.name_pattern;
+  lo.radius_mm = o.radius_mm;
+  lo.yaw_deg = o.yaw_deg;
+  return read_light_json(path, lo);
 }
 
 }  // namespace ptmkit::calib

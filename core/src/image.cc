@@ -35,11 +35,4 @@ ConstImageViewF Image::view() const {
       colour_space_};
 }
 
-Image Image::copy_of(ConstImageViewF view) {
-  Image out(view.width, view.height, view.channels, view.colour_space);
-  const auto row_len = static_cast<std::size_t>(view.width) * view.channels;
-  for (int y = 0; y < view.height; ++y) std::copy_n(view.row(y), row_len, out.row(y));
-  return out;
-}
-
 }  // namespace ptmkit

@@ -11,6 +11,7 @@
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/core/stack_reader.h"
 
 namespace ptmkit::fit {
@@ -86,18 +87,12 @@ Evaluation evaluate(const SampleGrid& g, const std::vector<Eigen::Vector3d>& dir
   Evaluation ev;
   ev.texel_mse.assign(static_cast<std::size_t>(g.texels), 0.0);
   const int nch = g.channels == 3 ? 3 : 1;
-  for (int f = 0; f < folds; ++f) {
-    std::vector<int> train, test;
+  for (const Fold& fold : kfold_splits(g.lights, folds)) {
+    const std::vector<int>& train = fold.train;
+    const std::vector<int>& test = fold.test;
     std::vector<Eigen::Vector3d> train_dirs, test_dirs;
-    for (int i = 0; i < g.lights; ++i) {
-      if (i % folds == f) {
-        test.push_back(i);
-        test_dirs.push_back(dirs[static_cast<std::size_t>(i)]);
-      } else {
-        train.push_back(i);
-        train_dirs.push_back(dirs[static_cast<std::size_t>(i)]);
-      }
-    }
+    for (int i : train) train_dirs.push_back(dirs[static_cast<std::size_t>(i)]);
+    for (int i : test) test_dirs.push_back(dirs[static_cast<std::size_t>(i)]);
     const BasisDesign d = BasisDesign::build(basis, train_dirs, design);
     const Eigen::MatrixXd bt = basis_matrix(basis, test_dirs);
     tbb::parallel_for(0, g.texels, [&](int t) {
@@ -335,44 +330,6 @@ ModelReport select_model(const LightSet& lights, const ModelSelectOptions& optio
   }
   if (options.folds > g.lights) throw Error("model selection: more folds than lights");
   return run_selection(g, lights.directions(), w, h, stride, options);
-}
-
-ModelReport select_model_images(const std::vector<Image>& images,
-                                const std::vector<Eigen::Vector3d>& dirs,
-                                const ModelSelectOptions& options) {
-  if (const std::string p = options.validate(); !p.empty()) throw Error(p);
-  if (images.empty() || images.size() != dirs.size()) {
-    throw Error("select_model_images: one image per direction is needed");
-  }
-  const int w = images[0].width();
-  const int h = images[0].height();
-  const int ch = images[0].channels();
-  const int stride = grid_stride(w, h, options.sample_texels);
-  const int off = stride / 2;
-  const int nx = (w - off + stride - 1) / stride;
-  const int ny = (h - off + stride - 1) / stride;
-  SampleGrid g;
-  g.lights = static_cast<int>(images.size());
-  g.channels = ch;
-  g.texels = nx * ny;
-  g.v.assign(static_cast<std::size_t>(g.texels) * g.lights * 3, 0.0f);
-  float vmax = 0.0f;
-  for (int gy = 0; gy < ny; ++gy) {
-    for (int gx = 0; gx < nx; ++gx) {
-      const int t = gy * nx + gx;
-      for (int i = 0; i < g.lights; ++i) {
-        for (int k = 0; k < 3; ++k) {
-          const float v = images[static_cast<std::size_t>(i)].at(
-              off + gx * stride, off + gy * stride, ch == 3 ? k : 0);
-          vmax = std::max(vmax, v);
-          g.v[(static_cast<std::size_t>(t) * g.lights + i) * 3 + k] = v;
-        }
-      }
-    }
-  }
-  g.clamp_top = vmax <= 1.0f;
-  if (options.folds > g.lights) throw Error("model selection: more folds than lights");
-  return run_selection(g, dirs, w, h, stride, options);
 }
 
 }  // namespace ptmkit::fit

@@ -117,11 +117,6 @@ bool is_shared_solver(Solver solver) {
          solver == Solver::kRidge;
 }
 
-bool is_ceres_solver(Solver solver) {
-  return solver == Solver::kCeresHuber || solver == Solver::kCeresCauchy ||
-         solver == Solver::kCeresTukey;
-}
-
 std::string RobustOptions::validate() const {
   const auto pos = [](double v) { return std::isfinite(v) && v > 0.0; };
   if (!pos(mad_factor) || !pos(min_scale)) return "robust scale factors must be finite and > 0";

@@ -363,22 +363,10 @@ SynthReport render_capture(const SynthOptions& o, const fs::path& out_dir) {
   written(report.lp_file);
   report.images = n;
   if (near) {
-    // The .lp holds only the nominal directions; positions go in lights.json, in the format
-    // of calib's dome JSON (read_dome_json, `ptmkit fit --lights-json`), and the plane
-    // geometry in plane.json.
-    nlohmann::json lj;
-    lj["frame"] = "light frame: x right, y toward the image top, z toward the camera; mm";
-    lj["lights"] = nlohmann::json::array();
-    for (int i = 0; i < n; ++i) {
-      const Light& l = light_set.lights[static_cast<std::size_t>(i)];
-      // Position only (the direction is normalise(position)): calib's read_dome_json takes
-      // one of the two per light.
-      lj["lights"].push_back(
-          {{"image", image_name(i, n, o.sensor.file_type)},
-           {"position_mm", {l.position_mm->x(), l.position_mm->y(), l.position_mm->z()}},
-           {"intensity", l.intensity}});
-    }
-    write_file_atomic(out_dir / "lights.json", lj.dump(2) + "\n");
+    // The .lp holds only the nominal directions; positions go in lights.json (the light
+    // JSON of core/light_set.h, read by `ptmkit fit --lights-json`), and the plane geometry
+    // in plane.json.
+    write_light_json(out_dir / "lights.json", light_set);
     written(out_dir / "lights.json");
     write_plane_json(out_dir / "plane.json",
                      orthographic_plane(scene.width, scene.height, o.mm_per_px));

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/texture/relight.h"
 
 namespace ptmkit::texture {
@@ -172,8 +173,7 @@ IntegerErrorReport integer_vs_float(const CoefficientMap& map,
   if (rep.samples > 0) {
     const double n = static_cast<double>(rep.samples);
     rep.mean_abs_grey = sum_abs / n;
-    rep.psnr_db = sum_sq > 0 ? 10.0 * std::log10(255.0 * 255.0 / (sum_sq / n))
-                             : std::numeric_limits<double>::infinity();
+    rep.psnr_db = psnr_db(sum_sq / n, 255.0);
   }
   return rep;
 }

@@ -8,6 +8,7 @@
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/holdout.h"
 
 namespace ptmkit::texture {
 
@@ -62,7 +63,7 @@ ImageComparison compare_images(ConstImageViewF test, ConstImageViewF reference,
   r.max_abs = max_abs;
   const double mse = sum_sq / n;
   r.rmse = std::sqrt(mse);
-  r.psnr_db = mse > 0.0 ? 10.0 * std::log10(1.0 / mse) : std::numeric_limits<double>::infinity();
+  r.psnr_db = psnr_db(mse);
   return r;
 }
 

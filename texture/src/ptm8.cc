@@ -12,6 +12,7 @@
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/texture/integer_model.h"
@@ -299,8 +300,7 @@ struct ErrorAccumulator {
     e.mean_abs_grey = sum_abs / static_cast<double>(n);
     e.max_abs_grey = max_abs;
     const double mse = sum_sq / static_cast<double>(n);
-    e.psnr_db =
-        mse > 0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : std::numeric_limits<double>::infinity();
+    e.psnr_db = psnr_db(mse, 255.0);
     return e;
   }
 };

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/texture/ptm.h"
 
@@ -200,8 +201,7 @@ void relit_error(const Source& source, const FileValue& file_value, int width, s
   report->relit_mean_abs_grey = 255.0 * total.abs / static_cast<double>(total.n);
   report->relit_max_abs_grey = 255.0 * total.max;
   const double mse = total.sq / static_cast<double>(total.n);
-  report->relit_psnr_db =
-      mse > 0.0 ? 10.0 * std::log10(1.0 / mse) : std::numeric_limits<double>::infinity();
+  report->relit_psnr_db = psnr_db(mse);
 }
 
 // Quantises every texel of `source` with `q` into a PTM 1.2 file; fills `report` (optional).

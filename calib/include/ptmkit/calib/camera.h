@@ -52,6 +52,25 @@ struct CameraIntrinsics {
 [[nodiscard]] double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px);
 void write_camera_json(const std::filesystem::path& path, const CameraIntrinsics& camera);
 
+// Where a sphere calibration's focal length comes from: at most one of a camera file
+// (`ptmkit calibrate camera`), a lens (focal_mm on a sensor sensor_width_mm wide) or a focal
+// length in pixels; none means an orthographic camera.
+struct CameraSource {
+  std::filesystem::path camera_json;  // empty: none
+  double focal_mm = 0.0;              // 0: none; needs sensor_width_mm
+  double sensor_width_mm = 0.0;
+  double focal_px = 0.0;  // 0: none
+  // Overrides the camera file's principal point (pixels); nullopt: the file's, else the image
+  // centre.
+  std::optional<Eigen::Vector2d> principal_px;
+};
+
+// The camera of `source` for photographs width_px x height_px. Throws ptmkit::Error when more
+// than one focal length is given ("give the focal length once"), a lens lacks its sensor
+// width, or the camera file is unreadable or of another image size (naming the file).
+[[nodiscard]] SphereCamera resolve_sphere_camera(const CameraSource& source, int width_px,
+                                                 int height_px);
+
 struct CameraCalibrationOptions {
   // Detector settings; the family comes from the board unless `family` is given.
   TagDetectorOptions detector;

@@ -24,11 +24,6 @@ namespace ptmkit::calib {
 // ptmkit::Error on an unknown or malformed spec.
 [[nodiscard]] std::vector<Eigen::Vector3d> layout_directions(std::string_view spec);
 
-// A light set for a layout, naming image i (1-based) by `pattern` with "%03d"-style
-// substitution done by std::format-free zero padding: e.g. "image_%03d.png".
-[[nodiscard]] LightSet layout_light_set(std::string_view spec,
-                                        const std::string& name_pattern = "image_%03d.png");
-
 // A dome: a layout of lights, optionally at a finite radius (near lights), rotated about the
 // camera axis relative to the image.
 struct DomeOptions {
@@ -54,16 +49,11 @@ struct DomeOptions {
 //   {"radius_mm": 500,                 optional: distant lights when absent or 0
 //    "yaw_deg": 0,                     optional rotation about the camera axis
 //    "layout": "dome49",               either a layout spec ...
-//    "lights": [                       ... or the lights themselves, each with
-//      {"image": "a.jpg", "direction": [x, y, z]}        a direction, or
-//      {"image": "b.jpg", "position_mm": [x, y, z]}      a position relative to the
-//    ]}                                                   sample-plane origin (light frame)
-// Image names default to the pattern. Errors name the file and the entry.
+//    "lights": [...]}                  ... or the lights themselves: the light JSON
+//                                      (core/light_set.h, read_light_json)
+// Image names default to the pattern. Errors name the file and the entry. Lights are written
+// back as light JSON with write_light_json (core/light_set.h).
 [[nodiscard]] LightSet read_dome_json(const std::filesystem::path& path,
                                       const DomeOptions& defaults = {});
-
-// Writes every light (image, direction, position_mm, intensity) as JSON, atomically: the
-// companion of the .lp for near lights, whose positions the .lp format cannot hold.
-void write_light_set_json(const std::filesystem::path& path, const LightSet& lights);
 
 }  // namespace ptmkit::calib

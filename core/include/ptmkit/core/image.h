@@ -82,8 +82,6 @@ class Image {
 
   [[nodiscard]] ImageViewF view();
   [[nodiscard]] ConstImageViewF view() const;
-  // A tightly packed copy of any view.
-  [[nodiscard]] static Image copy_of(ConstImageViewF view);
 
  private:
   [[nodiscard]] std::size_t index(int x, int y, int c) const {

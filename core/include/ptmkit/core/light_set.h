@@ -55,6 +55,44 @@ struct LpWriteOptions {
 void write_lp(const std::filesystem::path& path, const LightSet& lights,
               const LpWriteOptions& options = {});
 
+// Light JSON: the companion of the .lp for near lights, whose positions the .lp cannot hold
+// (written by `ptmkit calibrate dome --json`, `calibrate sphere --json` and `ptmkit synth`
+// near sets; read by `ptmkit fit --lights-json`):
+//   {"frame": "...",                   informative only
+//    "radius_mm": 500,                 optional: lights given by direction get
+//                                      position_mm = radius_mm * direction
+//    "yaw_deg": 0,                     optional: rotation about the camera axis (z), degrees
+//                                      counter-clockwise seen from the camera
+//    "lights": [                       one entry per light, in image order, each with
+//      {"image": "a.jpg",              a name relative to the JSON's folder (optional),
+//       "direction": [x, y, z],        a direction, a position (mm, light frame, origin at
+//       "position_mm": [x, y, z],      the sample-plane centre) or both (they must agree),
+//       "intensity": 1.0}              and optionally a relative intensity (> 0)
+//    ]}
+struct LightJsonReadOptions {
+  // Name of light i (1-based, printf-style) when an entry has no "image".
+  std::string name_pattern = "image_%03d.png";
+  // Used when the file does not give them.
+  double radius_mm = 0.0;
+  double yaw_deg = 0.0;
+};
+
+// Reads a light JSON. Errors name the file and the entry: a missing or malformed file,
+// non-numeric, non-finite or zero vectors, a light not above the plane (z <= 0), a direction
+// that does not point at its position, a non-positive intensity, a dome description
+// ("layout", calib's read_dome_json) given where lights are expected.
+[[nodiscard]] LightSet read_light_json(const std::filesystem::path& path,
+                                       const LightJsonReadOptions& options = {});
+
+// Writes every light (image, direction, position_mm when known, intensity) atomically.
+// Image names are written relative to the file's folder, as write_lp does.
+void write_light_json(const std::filesystem::path& path, const LightSet& lights);
+
+// Near lights: copies the positions of the light JSON at `light_json` onto `lights` (an .lp's
+// set), matched in order. Throws ptmkit::Error naming the file when the counts or image
+// names differ or a light has no position.
+void attach_light_positions(LightSet* lights, const std::filesystem::path& light_json);
+
 // Light direction from elevation above the plane and azimuth (counter-clockwise from +x, in
 // the light frame), both in degrees.
 [[nodiscard]] Eigen::Vector3d direction_from_angles_deg(double elevation_deg, double azimuth_deg);

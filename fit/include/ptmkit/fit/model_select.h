@@ -84,9 +84,5 @@ struct ModelReport {
 // Reads the sample grid of the capture and evaluates every candidate. Throws ptmkit::Error on
 // unreadable images (naming the file) or when no candidate can be fitted.
 ModelReport select_model(const LightSet& lights, const ModelSelectOptions& options = {});
-// The same on images in memory, one per direction.
-ModelReport select_model_images(const std::vector<Image>& images,
-                                const std::vector<Eigen::Vector3d>& dirs,
-                                const ModelSelectOptions& options = {});
 
 }  // namespace ptmkit::fit

@@ -42,6 +42,8 @@
 
 #include <Eigen/Core>
 
+#include "ptmkit/core/sample_label.h"
+
 namespace ptmkit::fit {
 
 enum class Solver {
@@ -70,10 +72,9 @@ enum class Solver {
 [[nodiscard]] Solver resolve_solver(Solver solver);
 // True for the solvers that apply one shared pseudo-inverse to every texel (no labels).
 [[nodiscard]] bool is_shared_solver(Solver solver);
-[[nodiscard]] bool is_ceres_solver(Solver solver);
 
-// Per-sample labels. Codes match the synth stage's truth labels.
-enum class SampleLabel : std::uint8_t { kInlier = 0, kShadow = 1, kHighlight = 2 };
+// Per-sample labels (core/sample_label.h: the codes of label files and of synth's truth).
+using ptmkit::SampleLabel;
 
 // Tuning of the robust variants. Sample values are in normalised units (1.0 = full scale,
 // 1/255 = one 8-bit grey level). Defaults were chosen on the synth presets (docs/SOLVERS.md).

@@ -27,8 +27,8 @@
 //   truth.json                     scene kind, preset, seed, size, material, sensor, lights,
 //                                  images, label codes, truth files, dome radius, mm per pixel
 // Near lights only (dome_radius_mm > 0):
-//   lights.json                    every light's image, position_mm and intensity (calib's
-//                                  dome JSON, read_dome_json; `ptmkit fit --lights-json`)
+//   lights.json                    every light's image, direction, position_mm and intensity
+//                                  (the light JSON, core/light_set.h; `fit --lights-json`)
 //   plane.json                     the sample plane (core/plane.h): orthographic_plane of the
 //                                  image size and mm_per_px
 // Relief only:
@@ -56,18 +56,19 @@
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/sample_label.h"
 
 namespace ptmkit::synth {
 
-// Per-sample outlier labels (truth/labels/*.png values).
-inline constexpr std::uint8_t kLabelInlier = 0;
+// Per-sample outlier labels (truth/labels/*.png values): the codes of core/sample_label.h.
+inline constexpr std::uint8_t kLabelInlier = label_code(SampleLabel::kInlier);
 // Shadowed: the texel faces away from the light (attached shadow, n.l <= 0) or the height
 // field blocks the light (cast shadow).
-inline constexpr std::uint8_t kLabelShadow = 1;
+inline constexpr std::uint8_t kLabelShadow = label_code(SampleLabel::kShadow);
 // Highlight: the specular term raises some channel by more than
 // SynthOptions::highlight_threshold_grey grey levels of the output encoding, or some channel
 // exceeded full scale before clipping (integer outputs).
-inline constexpr std::uint8_t kLabelHighlight = 2;
+inline constexpr std::uint8_t kLabelHighlight = label_code(SampleLabel::kHighlight);
 
 enum class SceneKind { kRelief, kPolynomial };
 [[nodiscard]] std::string_view to_string(SceneKind kind);

@@ -1,10 +1,11 @@
-// Synthetic stacks rendered in memory and scored against their truth, for the robust tests.
+// Synthetic stacks rendered in memory and scored against their truth (test support: the
+// robust tests and bench/robust_quality).
 #pragma once
 
 #include <string>
 #include <vector>
 
-#include "ptmkit/fit/evaluate.h"
+#include "ptmkit/eval/truth.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/synth/synth.h"
 
@@ -36,9 +37,9 @@ inline SynthStack render_preset(const std::string& preset, int size) {
 
 struct SolverScores {
   double psnr_db = 0.0;
-  fit::OutlierScores outliers_all;
-  fit::OutlierScores outliers_lit;
-  fit::NormalError normals;
+  eval::OutlierScores outliers_all;
+  eval::OutlierScores outliers_lit;
+  eval::NormalError normals;
   fit::FitReport report;
 };
 
@@ -55,12 +56,12 @@ inline SolverScores score_solver(const SynthStack& s, fit::Solver solver,
   CoefficientMapSink sink(&map);
   SolverScores r;
   r.report = fit::fit_images(s.observed, s.dirs, o, sink, &out);
-  r.psnr_db = fit::psnr_against_truth(map, s.dirs, s.diffuse, s.scene.normals).psnr_db;
+  r.psnr_db = eval::psnr_against_truth(map, s.dirs, s.diffuse, s.scene.normals).psnr_db;
   r.outliers_all =
-      fit::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, false);
+      eval::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, false);
   r.outliers_lit =
-      fit::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, true);
-  r.normals = fit::normal_error(out.normals, s.scene.normals);
+      eval::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, true);
+  r.normals = eval::normal_error(out.normals, s.scene.normals);
   return r;
 }
 

@@ -11,7 +11,7 @@
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/image.h"
 
-namespace ptmkit::fit {
+namespace ptmkit::eval {
 
 // A sample (texel x, y under light i) is "lit" when the true normal faces the light:
 // n . l > 0. Elsewhere the diffuse truth is the (constant) ambient level, which no polynomial
@@ -58,4 +58,4 @@ struct NormalError {
 [[nodiscard]] NormalError normal_error(const Image& estimated, const Image& truth,
                                        const Image* mask = nullptr);
 
-}  // namespace ptmkit::fit
+}  // namespace ptmkit::eval

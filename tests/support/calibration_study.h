@@ -18,7 +18,7 @@
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/core/coefficients.h"
-#include "ptmkit/fit/evaluate.h"
+#include "ptmkit/eval/truth.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/synth/rig.h"
 #include "ptmkit/synth/synth.h"
@@ -171,13 +171,13 @@ struct RelightScore {
 inline RelightScore score(const Capture& c, const CoefficientMap& fit,
                           const CoefficientMap& reference) {
   RelightScore s;
-  s.psnr_db = fit::psnr_against_truth(fit, c.test_lights, c.test_diffuse, c.scene.normals).psnr_db;
+  s.psnr_db = eval::psnr_against_truth(fit, c.test_lights, c.test_diffuse, c.scene.normals).psnr_db;
   double sum = 0.0;
   std::uint64_t n = 0;
   for (const auto& l : c.test_lights) {
     for (int y = 0; y < fit.height; ++y) {
       for (int x = 0; x < fit.width; ++x) {
-        if (!fit::is_lit(c.scene.normals, x, y, l)) continue;
+        if (!eval::is_lit(c.scene.normals, x, y, l)) continue;
         float a[3], b[3];
         fit.evaluate(x, y, l.x(), l.y(), a);
         reference.evaluate(x, y, l.x(), l.y(), b);

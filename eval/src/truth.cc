@@ -1,4 +1,4 @@
-#include "ptmkit/fit/evaluate.h"
+#include "ptmkit/eval/truth.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,8 +6,9 @@
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/holdout.h"
 
-namespace ptmkit::fit {
+namespace ptmkit::eval {
 
 namespace {
 
@@ -59,7 +60,7 @@ TruthPsnr psnr_against_truth(const CoefficientMap& fit,
     }
   }
   const double mse = out.samples > 0 ? sum / static_cast<double>(out.samples) : 0.0;
-  out.psnr_db = mse > 0.0 ? -10.0 * std::log10(mse) : std::numeric_limits<double>::infinity();
+  out.psnr_db = psnr_db(mse);
   return out;
 }
 
@@ -130,4 +131,4 @@ NormalError normal_error(const Image& estimated, const Image& truth, const Image
   return e;
 }
 
-}  // namespace ptmkit::fit
+}  // namespace ptmkit::eval

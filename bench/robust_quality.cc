@@ -1,23 +1,24 @@
-// Robust solvers against the synth presets' ground truth.
+// Robust solvers against the synth presets' ground truth: per preset, an oracle (weighted
+// least squares on the truly good samples) and every solver's PSNR against the diffuse truth,
+// outlier precision/recall and normal error. The measurement behind docs/SOLVERS.md's tables.
+//
+// Usage: robust_quality SIZE [SOLVERS]   (SOLVERS: comma-separated, default
+//   ls,irls-huber,irls-tukey,trim,sign). Tuning overrides for experiments, from the
+//   environment: RK_HI (highlight_k), RK_SH (shadow_k), RK_MS (min_scale, grey levels),
+//   RK_DF (dark_fraction), RK_IT (max_iterations), RK_MI (min_inliers).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
+#include <string>
 
-#include <gtest/gtest.h>
-
-#include "robust_util.h"
+#include "ptmkit/core/error.h"
+#include "synth_stack.h"
 
 namespace ptmkit::fit {
 namespace {
 
-// Prints the solver table on every preset at $PTMKIT_ROBUST_TABLE pixels (measurement aid for
-// docs/SOLVERS.md; skipped unless set).
-TEST(RobustTable, PrintsEverySolverOnEveryPreset) {
-  const char* env = std::getenv("PTMKIT_ROBUST_TABLE");
-  if (env == nullptr) GTEST_SKIP() << "set PTMKIT_ROBUST_TABLE=SIZE to print the table";
-  const int size = std::atoi(env);
-  const char* solvers_env = std::getenv("PTMKIT_ROBUST_SOLVERS");
-  const std::string list = solvers_env ? solvers_env : "ls,irls-huber,irls-tukey,trim,sign";
+void print_table(int size, const std::string& list) {
   for (const char* preset : {"default", "matte", "glossy", "tall", "ambient"}) {
     const auto stack = test::render_preset(preset, size);
     {
@@ -31,7 +32,7 @@ TEST(RobustTable, PrintsEverySolverOnEveryPreset) {
       for (int y = 0; y < size; ++y)
         for (int x = 0; x < size; ++x) {
           for (std::size_t i = 0; i < n; ++i) {
-            const bool lit = is_lit(stack.scene.normals, x, y, stack.dirs[i]);
+            const bool lit = eval::is_lit(stack.scene.normals, x, y, stack.dirs[i]);
             double d = 0;
             for (int c = 0; c < 3; ++c)
               d += (stack.observed[i].at(x, y, c) - stack.diffuse[i].at(x, y, c)) / 3;
@@ -47,9 +48,10 @@ TEST(RobustTable, PrintsEverySolverOnEveryPreset) {
               map.texel_coeffs(x, y)[c * 6 + t] = static_cast<float>(cc[t]);
           }
         }
-      std::printf("%-8s oracle psnr %6.2f   true outliers below %llu above %llu\n", preset,
-                  psnr_against_truth(map, stack.dirs, stack.diffuse, stack.scene.normals).psnr_db,
-                  static_cast<unsigned long long>(below), static_cast<unsigned long long>(above));
+      std::printf(
+          "%-8s oracle psnr %6.2f   true outliers below %llu above %llu\n", preset,
+          eval::psnr_against_truth(map, stack.dirs, stack.diffuse, stack.scene.normals).psnr_db,
+          static_cast<unsigned long long>(below), static_cast<unsigned long long>(above));
     }
     double ls_psnr = 0.0;
     std::size_t a = 0;
@@ -83,3 +85,18 @@ TEST(RobustTable, PrintsEverySolverOnEveryPreset) {
 
 }  // namespace
 }  // namespace ptmkit::fit
+
+int main(int argc, char** argv) {
+  if (argc < 2 || argc > 3 || std::atoi(argv[1]) < 8) {
+    std::fprintf(stderr, "usage: robust_quality SIZE(>= 8 px) [SOLVERS]\n");
+    return 2;
+  }
+  try {
+    ptmkit::fit::print_table(std::atoi(argv[1]),
+                             argc > 2 ? argv[2] : "ls,irls-huber,irls-tukey,trim,sign");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "robust_quality: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

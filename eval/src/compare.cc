@@ -1,4 +1,4 @@
-#include "ptmkit/fit/compare.h"
+#include "ptmkit/eval/compare.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,13 +14,20 @@
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/holdout.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/eval/heldout.h"
 #include "ptmkit/fit/fit.h"
 
 namespace fs = std::filesystem;
 
-namespace ptmkit::fit {
+namespace ptmkit::eval {
+
+using fit::FitOptions;
+using fit::FitOutputs;
+using fit::FitReport;
+using fit::Solver;
 
 namespace {
 
@@ -109,116 +116,6 @@ std::optional<Truth> load_truth(const fs::path& lp, const Capture& cap) {
   return t;
 }
 
-// Separable Gaussian blur (sigma 1.5, radius 5) with weights renormalised at the border.
-std::vector<double> blur(const std::vector<double>& in, int w, int h) {
-  constexpr int kRadius = 5;
-  constexpr double kSigma = 1.5;
-  double k[2 * kRadius + 1];
-  for (int i = -kRadius; i <= kRadius; ++i)
-    k[i + kRadius] = std::exp(-0.5 * i * i / (kSigma * kSigma));
-  std::vector<double> tmp(in.size()), out(in.size());
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      double s = 0.0, ws = 0.0;
-      for (int d = -kRadius; d <= kRadius; ++d) {
-        const int xx = x + d;
-        if (xx < 0 || xx >= w) continue;
-        s += k[d + kRadius] * in[static_cast<std::size_t>(y) * w + xx];
-        ws += k[d + kRadius];
-      }
-      tmp[static_cast<std::size_t>(y) * w + x] = s / ws;
-    }
-  }
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      double s = 0.0, ws = 0.0;
-      for (int d = -kRadius; d <= kRadius; ++d) {
-        const int yy = y + d;
-        if (yy < 0 || yy >= h) continue;
-        s += k[d + kRadius] * tmp[static_cast<std::size_t>(yy) * w + x];
-        ws += k[d + kRadius];
-      }
-      out[static_cast<std::size_t>(y) * w + x] = s / ws;
-    }
-  }
-  return out;
-}
-
-// Mean SSIM of two luma images (peak 1).
-double ssim(const std::vector<double>& a, const std::vector<double>& b, int w, int h) {
-  constexpr double kC1 = 0.01 * 0.01;
-  constexpr double kC2 = 0.03 * 0.03;
-  std::vector<double> aa(a.size()), bb(a.size()), ab(a.size());
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    aa[i] = a[i] * a[i];
-    bb[i] = b[i] * b[i];
-    ab[i] = a[i] * b[i];
-  }
-  const auto ma = blur(a, w, h), mb = blur(b, w, h);
-  const auto saa = blur(aa, w, h), sbb = blur(bb, w, h), sab = blur(ab, w, h);
-  double sum = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    const double va = saa[i] - ma[i] * ma[i];
-    const double vb = sbb[i] - mb[i] * mb[i];
-    const double cov = sab[i] - ma[i] * mb[i];
-    sum += ((2 * ma[i] * mb[i] + kC1) * (2 * cov + kC2)) /
-           ((ma[i] * ma[i] + mb[i] * mb[i] + kC1) * (va + vb + kC2));
-  }
-  return a.empty() ? 0.0 : sum / static_cast<double>(a.size());
-}
-
-struct HeldOut {
-  double sum_sq = 0.0;
-  std::uint64_t samples = 0;
-  double ssim_sum = 0.0;
-  int images = 0;
-};
-
-// Predicts `map` at light `dir` and scores it against `observed`.
-void score_prediction(const CoefficientMap& map, const Eigen::Vector3d& dir, const Image& observed,
-                      bool integer, bool want_ssim, HeldOut* acc) {
-  const int w = map.width;
-  const int h = map.height;
-  const int ch = std::min(observed.channels(), 3);
-  const Eigen::Vector3d l = dir.normalized();
-  std::vector<double> pl, ol;
-  if (want_ssim) {
-    pl.resize(static_cast<std::size_t>(w) * h);
-    ol.resize(pl.size());
-  }
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      float rgb[3];
-      map.evaluate(x, y, l.x(), l.y(), rgb);
-      double p[3], o[3];
-      for (int c = 0; c < 3; ++c) {
-        p[c] = std::max(0.0, static_cast<double>(rgb[c]));
-        if (integer) p[c] = std::min(p[c], 1.0);
-        o[c] = observed.at(x, y, std::min(c, observed.channels() - 1));
-      }
-      for (int c = 0; c < ch; ++c) {
-        acc->sum_sq += (p[c] - o[c]) * (p[c] - o[c]);
-        ++acc->samples;
-      }
-      if (want_ssim) {
-        const auto i = static_cast<std::size_t>(y) * w + x;
-        pl[i] = ch == 3 ? luma(p[0], p[1], p[2]) : p[0];
-        ol[i] = ch == 3 ? luma(o[0], o[1], o[2]) : o[0];
-      }
-    }
-  }
-  if (want_ssim) {
-    acc->ssim_sum += ssim(pl, ol, w, h);
-    ++acc->images;
-  }
-}
-
-double psnr_of(double sum_sq, std::uint64_t n) {
-  if (n == 0) return 0.0;
-  const double mse = sum_sq / static_cast<double>(n);
-  return mse > 0.0 ? -10.0 * std::log10(mse) : std::numeric_limits<double>::infinity();
-}
-
 FitOptions base_options(const CompareOptions& o, Solver s) {
   FitOptions f;
   f.model = o.model;
@@ -264,7 +161,8 @@ std::string CompareOptions::validate() const {
   if (solvers.empty()) return "no solvers given";
   std::set<Solver> seen;
   for (Solver s : solvers) {
-    if (!seen.insert(s).second) return "solver '" + std::string(to_string(s)) + "' given twice";
+    if (!seen.insert(s).second)
+      return "solver '" + std::string(fit::to_string(s)) + "' given twice";
   }
   if (folds < 2) return "folds must be at least 2";
   if (threads < 0) return "threads must be >= 0 (0 = all cores)";
@@ -283,7 +181,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
   report.height = h;
   report.channels = std::min(cap.images[0].channels(), 3);
   report.lights = static_cast<int>(cap.dirs.size());
-  report.condition_number = analyse_design(cap.dirs, options.design).condition_number;
+  report.condition_number = fit::analyse_design(cap.dirs, options.design).condition_number;
   std::optional<Capture> test;
   if (test_lp) {
     report.test = *test_lp;
@@ -302,7 +200,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
   report.has_normals = truth.has_value();
   const std::size_t ns = options.solvers.size();
   report.results.resize(ns);
-  std::vector<HeldOut> held(ns);
+  std::vector<HeldOutScore> held(ns);
   const double texels = static_cast<double>(w) * h;
 
   for (std::size_t k = 0; k < ns; ++k) {
@@ -312,7 +210,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
     CoefficientMap map;
     for (int rep = 0; rep < options.timing_repeats; ++rep) {
       CoefficientMapSink sink(&map);
-      const FitReport fr = fit_images(cap.images, cap.dirs, base_options(options, s), sink);
+      const FitReport fr = fit::fit_images(cap.images, cap.dirs, base_options(options, s), sink);
       if (rep == 0 || fr.fit_seconds < r.fit_seconds) {
         r.fit_seconds = fr.fit_seconds;
         r.wall_seconds = fr.total_seconds;
@@ -326,8 +224,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
     r.mtexels_per_second = r.wall_seconds > 0 ? texels / r.wall_seconds / 1e6 : 0.0;
     if (test) {
       for (std::size_t i = 0; i < test->dirs.size(); ++i) {
-        score_prediction(map, test->dirs[i], test->images[i], test->integer, options.ssim,
-                         &held[k]);
+        held[k].add(map, test->dirs[i], test->images[i], test->integer, options.ssim);
       }
     }
     if (truth) {
@@ -337,7 +234,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
       out.want_normals = true;
       CoefficientMap tmap;
       CoefficientMapSink sink(&tmap);
-      (void)fit_images(cap.images, cap.dirs, o, sink, &out);
+      (void)fit::fit_images(cap.images, cap.dirs, o, sink, &out);
       r.normals =
           normal_error(out.normals, truth->normals, truth->mask.empty() ? nullptr : &truth->mask);
       if (report.has_truth) {
@@ -352,39 +249,37 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
   if (!test) {
     // Folds outermost: one training set in memory at a time, shared by every solver.
     const int kf = options.folds;
+    const std::vector<Fold> folds = kfold_splits(report.lights, kf);
     for (int f = 0; f < kf; ++f) {
+      const Fold& fold = folds[static_cast<std::size_t>(f)];
       std::vector<Image> train;
       std::vector<Eigen::Vector3d> train_dirs;
-      std::vector<std::size_t> held_idx;
-      for (std::size_t i = 0; i < cap.dirs.size(); ++i) {
-        if (static_cast<int>(i % static_cast<std::size_t>(kf)) == f) {
-          held_idx.push_back(i);
-        } else {
-          train.push_back(cap.images[i]);
-          train_dirs.push_back(cap.dirs[i]);
-        }
+      for (int i : fold.train) {
+        train.push_back(cap.images[static_cast<std::size_t>(i)]);
+        train_dirs.push_back(cap.dirs[static_cast<std::size_t>(i)]);
       }
       for (std::size_t k = 0; k < ns; ++k) {
         CoefficientMap map;
         CoefficientMapSink sink(&map);
         try {
-          (void)fit_images(train, train_dirs, base_options(options, options.solvers[k]), sink);
+          (void)fit::fit_images(train, train_dirs, base_options(options, options.solvers[k]), sink);
         } catch (const Error& e) {
           throw Error(capture_lp.string() + ": fold " + std::to_string(f + 1) + " of " +
                       std::to_string(kf) + " (lights i with i mod " + std::to_string(kf) + " = " +
                       std::to_string(f) + " held out) cannot be fitted: " + e.what());
         }
-        for (std::size_t i : held_idx) {
-          score_prediction(map, cap.dirs[i], cap.images[i], cap.integer, options.ssim, &held[k]);
+        for (int i : fold.test) {
+          const auto u = static_cast<std::size_t>(i);
+          held[k].add(map, cap.dirs[u], cap.images[u], cap.integer, options.ssim);
         }
       }
     }
   }
   for (std::size_t k = 0; k < ns; ++k) {
     SolverResult& r = report.results[k];
-    r.heldout_psnr_db = psnr_of(held[k].sum_sq, held[k].samples);
-    r.heldout_samples = held[k].samples;
-    r.heldout_ssim = held[k].images > 0 ? held[k].ssim_sum / held[k].images : 0.0;
+    r.heldout_psnr_db = held[k].psnr_db();
+    r.heldout_samples = held[k].samples();
+    r.heldout_ssim = held[k].mean_ssim();
   }
   mark_pareto(&report);
   return report;
@@ -412,7 +307,7 @@ std::string CompareReport::to_json() const {
   nlohmann::json arr = nlohmann::json::array();
   for (const auto& r : results) {
     nlohmann::json e;
-    e["solver"] = std::string(to_string(r.solver));
+    e["solver"] = std::string(fit::to_string(r.solver));
     e["fit_seconds"] = r.fit_seconds;
     e["wall_seconds"] = r.wall_seconds;
     e["us_per_texel"] = r.us_per_texel;
@@ -461,9 +356,9 @@ std::string CompareReport::to_markdown() const {
   if (has_normals) s << "---|";
   s << "---|---|---|\n";
   for (const auto& r : results) {
-    const bool shared = is_shared_solver(r.solver);
-    s << "| " << (r.pareto ? "**" : "") << to_string(r.solver) << (r.pareto ? "**" : "") << " | "
-      << fmt("%.2f", r.us_per_texel) << " | " << fmt("%.2f", r.mtexels_per_second) << " | "
+    const bool shared = fit::is_shared_solver(r.solver);
+    s << "| " << (r.pareto ? "**" : "") << fit::to_string(r.solver) << (r.pareto ? "**" : "")
+      << " | " << fmt("%.2f", r.us_per_texel) << " | " << fmt("%.2f", r.mtexels_per_second) << " | "
       << fmt("%.3f", r.wall_seconds) << " | " << fmt("%.2f", r.heldout_psnr_db);
     if (ls != nullptr && &r != ls)
       s << " (" << fmt("%+.2f", r.heldout_psnr_db - ls->heldout_psnr_db) << ")";
@@ -512,7 +407,7 @@ std::string CompareReport::to_csv() const {
        "truth_psnr_db,normal_mean_deg,normal_median_deg,outlier_precision,outlier_recall,"
        "shadow_fraction,highlight_fraction,pareto\n";
   for (const auto& r : results) {
-    s << to_string(r.solver) << "," << fmt("%.4f", r.us_per_texel) << ","
+    s << fit::to_string(r.solver) << "," << fmt("%.4f", r.us_per_texel) << ","
       << fmt("%.4f", r.mtexels_per_second) << "," << fmt("%.5f", r.wall_seconds) << ","
       << fmt("%.4f", r.heldout_psnr_db) << "," << fmt("%.5f", r.heldout_ssim) << ",";
     s << (has_truth ? fmt("%.4f", r.truth_psnr_db) : "") << ",";
@@ -607,7 +502,7 @@ Image plot_tradeoff(const CompareReport& report) {
     } else {
       cv::circle(m, p, 6, blue, 2, cv::LINE_AA);
     }
-    cv::putText(m, std::string(to_string(r.solver)), {p.x + 9, p.y - 7}, font, 0.45,
+    cv::putText(m, std::string(fit::to_string(r.solver)), {p.x + 9, p.y - 7}, font, 0.45,
                 r.pareto ? red : blue, 1, cv::LINE_AA);
   }
   Image img(kW, kH, 3, ColourSpace::kSRGB);
@@ -631,4 +526,4 @@ void write_compare(const CompareReport& report, const fs::path& out_dir) {
   write_image(out_dir / "plot.png", plot.view(), ImageWriteOptions{PixelFormat::kU8});
 }
 
-}  // namespace ptmkit::fit
+}  // namespace ptmkit::eval

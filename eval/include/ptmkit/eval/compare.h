@@ -14,7 +14,8 @@
 //     and outlier precision/recall, with the definitions of evaluate.h; or, without
 //     truth.json, a 16-bit normal map `normals.png` ((n + 1) / 2, light frame) beside the light
 //     file (and optionally `mask.png`), as the SynthRTI benchmark ships: normal error only.
-// PSNR is 10 log10(1 / MSE) with peak 1.0 (full scale) over every sample and channel.
+// PSNR is 10 log10(1 / MSE) with peak 1.0 (full scale) over every sample and channel
+// (core/holdout.h); the held-out scores are heldout.h's, the folds core/holdout.h's.
 #pragma once
 
 #include <cstdint>
@@ -25,15 +26,15 @@
 
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/image.h"
+#include "ptmkit/eval/truth.h"
 #include "ptmkit/fit/design.h"
-#include "ptmkit/fit/evaluate.h"
 #include "ptmkit/fit/robust.h"
 
-namespace ptmkit::fit {
+namespace ptmkit::eval {
 
 struct CompareOptions {
   // Solvers to compare, in table order; at least one, no repeats.
-  std::vector<Solver> solvers;
+  std::vector<fit::Solver> solvers;
   // Folds over the capture's lights when no test set is given: 2 .. lights. Each fold's
   // training set (the other folds) must still be a fittable layout.
   int folds = 5;
@@ -44,14 +45,14 @@ struct CompareOptions {
   int timing_repeats = 1;
   // Mean SSIM of the held-out predictions (luma, 11x11 Gaussian window, sigma 1.5).
   bool ssim = true;
-  RobustOptions robust;
-  DesignOptions design;
+  fit::RobustOptions robust;
+  fit::DesignOptions design;
 
   [[nodiscard]] std::string validate() const;  // empty if valid
 };
 
 struct SolverResult {
-  Solver solver = Solver::kLS;
+  fit::Solver solver = fit::Solver::kLS;
   // Timing fit (all capture lights).
   double fit_seconds = 0.0;         // fitting only
   double wall_seconds = 0.0;        // the whole fit call
@@ -115,4 +116,4 @@ struct CompareReport {
 // each file atomically, all built in memory first.
 void write_compare(const CompareReport& report, const std::filesystem::path& out_dir);
 
-}  // namespace ptmkit::fit
+}  // namespace ptmkit::eval
