@@ -112,7 +112,7 @@ void run_fit(const FitArgs& args) {
   }
   LightSet lights = read_lp(args.lights);
   if (!args.lights_json.empty()) {
-    fit::attach_light_positions(&lights, calib::read_dome_json(args.lights_json), args.lights_json);
+    attach_light_positions(&lights, args.lights_json);
   }
   if (!args.plane.empty()) request.options.near.plane = read_plane_json(args.plane);
 

@@ -98,29 +98,6 @@ FitPlan plan_fit(const LightSet& lights, const FitRequest& request) {
   return plan;
 }
 
-void attach_light_positions(LightSet* lights, const LightSet& positioned,
-                            const std::string& source) {
-  if (positioned.size() != lights->size()) {
-    throw Error(source + ": " + std::to_string(positioned.size()) +
-                " lights but the light file has " + std::to_string(lights->size()));
-  }
-  for (std::size_t i = 0; i < positioned.size(); ++i) {
-    const Light& j = positioned.lights[i];
-    Light& l = lights->lights[i];
-    if (j.image.filename() != l.image.filename()) {
-      throw Error(source + ": light " + std::to_string(i + 1) + " is " +
-                  j.image.filename().string() + " but the light file's is " +
-                  l.image.filename().string());
-    }
-    if (!j.position_mm) {
-      throw Error(source + ": light " + std::to_string(i + 1) +
-                  " has no position_mm (directions only describe distant lights; give "
-                  "\"radius_mm\" or each light's \"position_mm\")");
-    }
-    l.position_mm = j.position_mm;
-  }
-}
-
 std::string FitRunReport::to_json() const {
   nlohmann::json j = internal::fit_report_json(fit);
   j["input"] = std::filesystem::absolute(input).lexically_normal().string();

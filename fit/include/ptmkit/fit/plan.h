@@ -57,13 +57,6 @@ struct FitPlan {
 // ptmkit::Error saying what does not go together and what would.
 [[nodiscard]] FitPlan plan_fit(const LightSet& lights, const FitRequest& request);
 
-// Near lights: copies each light's position_mm from `positioned` (a light JSON's lights, read
-// by the caller) onto `lights`, matched in order; `source` names where they came from in
-// errors. Throws ptmkit::Error when the counts or image names differ or a light has no
-// position.
-void attach_light_positions(LightSet* lights, const LightSet& positioned,
-                            const std::string& source);
-
 // What writing the coefficients cost (texture's .ptm or .rti writer reports), kept here so a
 // run's report is one typed struct.
 struct WriteSummary {
