@@ -13,6 +13,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/plane.h"
+#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/model_select.h"
@@ -26,7 +27,10 @@ namespace ptmkit::app {
 namespace {
 
 struct FitArgs {
-  std::string lights;
+  std::vector<std::string> inputs;  // the .lp, or with --lights the photographs
+  std::string lights_file;          // --lights
+  std::string crop;                 // --crop x,y,w,h
+  std::string input_colour_space = "auto";
   std::string output;
   std::string format = "rgb";
   std::string report;
@@ -71,6 +75,19 @@ void attach_light_positions(LightSet* lights, const std::string& json_path) {
   }
 }
 
+// The capture's lights: the .lp with its own images, or --lights applied to the images given.
+LightSet load_lights(const FitArgs& args) {
+  if (args.lights_file.empty()) {
+    if (args.inputs.size() != 1) {
+      throw Error("fit: give one light file (.lp), or --lights LIGHTS.lp and the images (" +
+                  std::to_string(args.inputs.size()) + " arguments given)");
+    }
+    return read_lp(args.inputs[0]);
+  }
+  std::vector<fs::path> images(args.inputs.begin(), args.inputs.end());
+  return with_images(read_lp(args.lights_file), images);
+}
+
 // Checks an output map's extension before the fit runs (no work lost on a typo).
 void check_map_path(const std::string& path, const char* flag, bool png_ok) {
   if (path.empty()) return;
@@ -83,7 +100,7 @@ void check_map_path(const std::string& path, const char* flag, bool png_ok) {
 // false when the PTM is to be fitted (auto chose it; options->model is then its colour model).
 bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* model_json) {
   const fs::path out_path(args.output);
-  const LightSet lights = read_lp(args.lights);
+  const LightSet lights = load_lights(args);
   fit::Basis basis = fit::Basis::kPtm;
   ColourModel colour = options->model;
   if (args.model == "auto") {
@@ -125,6 +142,7 @@ bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* m
   bo.threads = options->threads;
   bo.band_rows = options->band_rows;
   bo.progress = make_progress("fit");
+  bo.input = options->input;
   fit::BasisMap map;
   const fit::BasisFitReport report = fit::fit_basis_capture(lights, bo, &map);
   texture::RtiMap rti(map.width, map.height, map.terms(), map.colour_space);
@@ -132,7 +150,9 @@ bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* m
   const texture::RtiWriteReport written = texture::write_rti(out_path, rti);
   if (!args.report.empty()) {
     nlohmann::json j = nlohmann::json::parse(report.to_json());
-    j["input"] = fs::absolute(args.lights).lexically_normal().string();
+    j["input"] = fs::absolute(args.lights_file.empty() ? args.inputs[0] : args.lights_file)
+                     .lexically_normal()
+                     .string();
     j["output"] = fs::absolute(out_path).lexically_normal().string();
     j["quantisation"] = {{"file_bytes", written.file_bytes},
                          {"max_coeff_error", written.max_coeff_error},
@@ -152,6 +172,8 @@ bool run_model_fit(const FitArgs& args, fit::FitOptions* options, std::string* m
 
 void run_fit(const FitArgs& args) {
   fit::FitOptions options = args.options;
+  if (!args.crop.empty()) options.input.crop = parse_pixel_rect(args.crop);
+  options.input.colour_space = parse_input_colour_space(args.input_colour_space);
   options.model = parse_colour_model(args.format);
   if (args.precision == "double") {
     options.precision = fit::Precision::kDouble;
@@ -185,7 +207,7 @@ void run_fit(const FitArgs& args) {
     options.outputs = &outputs;
   }
   options.progress = make_progress("fit");
-  LightSet lights = read_lp(args.lights);
+  LightSet lights = load_lights(args);
   if (!args.lights_json.empty()) attach_light_positions(&lights, args.lights_json);
   if (!args.plane.empty()) options.near.plane = read_plane_json(args.plane);
   texture::PtmStreamWriter writer(out_path);
@@ -208,7 +230,9 @@ void run_fit(const FitArgs& args) {
 
   if (!args.report.empty()) {
     nlohmann::json j = nlohmann::json::parse(report.to_json());
-    j["input"] = fs::absolute(args.lights).lexically_normal().string();
+    j["input"] = fs::absolute(args.lights_file.empty() ? args.inputs[0] : args.lights_file)
+                     .lexically_normal()
+                     .string();
     j["output"] = fs::absolute(out_path).lexically_normal().string();
     if (!model_json.empty()) j["model_selection"] = nlohmann::json::parse(model_json);
     j["quantisation"] = {
@@ -257,8 +281,31 @@ void add_fit_command(CLI::App& root) {
       "fit",
       "Fit a polynomial texture map to the photographs listed in a light file (.lp): per texel, "
       "the least-squares biquadratic in the light direction. Writes a PTM 1.2 file.");
-  cmd->add_option("lights", args->lights, "Light file (.lp); its images are the capture")
+  cmd->add_option("lights", args->inputs,
+                  "Light file (.lp); its images are the capture. With --lights: the photographs, "
+                  "one per light in the light file's order")
       ->required();
+  cmd->add_option("--lights", args->lights_file,
+                  "Use this light file's lights for the images given instead of its own (a "
+                  "calibration capture's lights applied to an object's photos from the same "
+                  "rig, same order; the counts must match)");
+  cmd->add_option("--crop", args->crop,
+                  "Fit and write only this rectangle of the photos: x,y,width,height in the "
+                  "photos' pixels as displayed (x right, y down from the top-left); near lights "
+                  "and the plane keep the photos' coordinates");
+  cmd->add_option("--mask", args->options.input.mask,
+                  "Mask image of the photos' size: only its object pixels (above half of full "
+                  "scale) are fitted; the output covers the mask's bounding box (within --crop) "
+                  "and texels outside the mask are black");
+  cmd->add_option("--input-colour-space", args->input_colour_space,
+                  "What the photos' values are: auto (the files' colour metadata; without it "
+                  "8-bit files are sRGB and 16-bit and float files linear, as raw converters "
+                  "write them), srgb or linear. The choice and why go in the report")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "srgb", "linear"}));
+  cmd->add_flag("--allow-damaged-images", args->options.input.image.allow_damaged,
+                "Accept photos whose decoder reports damaged data (a truncated JPEG, corrupt "
+                "blocks) with a warning; by default they are errors");
   cmd->add_option("-o,--output", args->output,
                   "Output file: .ptm for the ptm model, .rti for hsh2/3/4")
       ->required();

@@ -1,6 +1,9 @@
 # Every third-party dependency, found once, from Debian's packages (scripts/install-deps.sh).
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
 find_package(OpenImageIO REQUIRED)
+find_package(JPEG REQUIRED)
+find_package(PNG REQUIRED)
+find_package(TIFF REQUIRED)
 find_package(TBB REQUIRED)
 find_package(nlohmann_json 3.10 REQUIRED)
 find_package(CLI11 REQUIRED)

@@ -260,7 +260,7 @@ BasisFitReport run_fit(const std::vector<Eigen::Vector3d>& dirs, int width, int 
 
 BasisFitReport fit_basis_capture(const LightSet& lights, const BasisFitOptions& options,
                                  BasisMap* out) {
-  StackReader reader(lights.images());
+  StackReader reader(lights.images(), options.input);
   const int rows = std::max(1, options.band_rows);
   return run_fit(lights.directions(), reader.width(), reader.height(), reader.channels(),
                  reader.info().colour_space, options, out,

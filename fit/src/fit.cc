@@ -161,6 +161,9 @@ struct NearFit {
   const NearLightModel* model = nullptr;
   bool falloff = false;
   double ridge_lambda = 0.0;  // relative to the number of lights, as DesignOptions'
+  // Photo pixel of texel (0, 0) (a crop or mask box): the plane maps photo pixels.
+  int origin_x = 0;
+  int origin_y = 0;
 };
 
 // One texel's light geometry under near lights: design rows, directions, sample corrections.
@@ -719,7 +722,8 @@ class BandFitter {
     const std::vector<SampleLabel> labels(un, SampleLabel::kInlier);
     const double ridge = near_.ridge_lambda * static_cast<double>(n);
     for (int x = 0; x < width_; ++x) {
-      near_.model->texel(x, y, g.dirs.data(), g.correction.data());
+      near_.model->texel(x + near_.origin_x, y + near_.origin_y, g.dirs.data(),
+                         g.correction.data());
       for (int i = 0; i < n; ++i) {
         const auto b = ptm_basis(g.dirs(i, 0), g.dirs(i, 1));
         for (int t = 0; t < kPtmTerms; ++t) g.basis(i, t) = b[static_cast<std::size_t>(t)];
@@ -1041,8 +1045,8 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
   const LightModelSetup setup = light_model_setup(lights, options);
   FitReport report;
   {
-    StackReader reader(lights.images());
-    setup.check_size(reader.width(), reader.height());
+    StackReader reader(lights.images(), options.input);
+    setup.check_size(reader.summary().full_width, reader.summary().full_height);
     FitOptions run_options = options;
     if (reader.info().format == PixelFormat::kF32) {
       // Float files are not clipped at full scale (HDR): no sample is "saturated".
@@ -1051,8 +1055,12 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
     const auto source = [&](int rows, StackBand* band) {
       return reader.read_band(rows, band, BandStorage::kNative8);
     };
+    NearFit near = setup.fit(run_options);
+    near.origin_x = reader.origin_x();
+    near.origin_y = reader.origin_y();
     report = run_fit(design, run_options, reader.width(), reader.height(), reader.channels(),
-                     reader.info().colour_space, source, sink, setup.fit(run_options));
+                     reader.info().colour_space, source, sink, near);
+    report.input = reader.summary();
     setup.finish(&report);
   }  // images closed before the sink finishes
   finish_sink(sink, &report);
@@ -1119,6 +1127,7 @@ std::string FitReport::to_json() const {
     if (!light_model.note.empty()) lm["note"] = light_model.note;
     j["light_model"] = lm;
   }
+  if (input.full_width > 0) j["images"] = nlohmann::json::parse(input.to_json());
   j["threads"] = threads;
   j["timings_s"] = {{"decode", decode_seconds},
                     {"fit", fit_seconds},

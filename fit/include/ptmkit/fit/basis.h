@@ -29,6 +29,7 @@
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
+#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/design.h"
 
 namespace ptmkit::fit {
@@ -91,6 +92,9 @@ struct BasisFitOptions {
   // Rows per band (memory as fit.h's FitOptions::band_rows).
   int band_rows = 8;
   ProgressFn progress;
+  // How the photographs are read: crop or mask, colour space, damaged files (as
+  // FitOptions::input).
+  StackReadOptions input;
 
   [[nodiscard]] std::string validate() const;  // empty if valid
 };
