@@ -79,9 +79,12 @@ class JpegDecoder final : public Decoder {
     header_.channels = cinfo_.num_components == 1 ? 1 : 3;
     header_.format = PixelFormat::kU8;
     header_.codec = "jpeg";
+    bool exif_seen = false;
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m != nullptr; m = m->next) {
-      if (m->marker == JPEG_APP0 + 1 && m->data_length > 6 &&
+      // The first EXIF segment is the image's (a file has one; later ones are ignored).
+      if (m->marker == JPEG_APP0 + 1 && m->data_length > 6 && !exif_seen &&
           std::memcmp(m->data, "Exif\0\0", 6) == 0) {
+        exif_seen = true;
         const ExifFacts exif = parse_exif(m->data + 6, m->data_length - 6);
         header_.orientation = exif.orientation;
         if (exif.colour_space_tag == 1 && !header_.has_colour_metadata) {

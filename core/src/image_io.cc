@@ -44,12 +44,11 @@ std::vector<unsigned char> decode_all(internal::Decoder& d) {
   return native;
 }
 
+// v / 255 or v / 65535 in float, as the stack reader converts (so both give the same bits).
 template <class T>
-void to_float(const unsigned char* src, std::size_t count, double scale, float* out) {
+void to_float(const unsigned char* src, std::size_t count, float scale, float* out) {
   const T* p = reinterpret_cast<const T*>(src);
-  for (std::size_t k = 0; k < count; ++k) {
-    out[k] = static_cast<float>(static_cast<double>(p[k]) / scale);
-  }
+  for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(p[k]) / scale;
 }
 
 }  // namespace
@@ -83,9 +82,9 @@ Image read_image(const fs::path& path, const ImageReadOptions& options) {
     }
     float* dst = img.row(y);
     if (h.format == PixelFormat::kU8) {
-      to_float<std::uint8_t>(src, row_samples, 255.0, dst);
+      to_float<std::uint8_t>(src, row_samples, 255.0f, dst);
     } else if (h.format == PixelFormat::kU16) {
-      to_float<std::uint16_t>(src, row_samples, 65535.0, dst);
+      to_float<std::uint16_t>(src, row_samples, 65535.0f, dst);
     } else {
       std::memcpy(dst, src, row_samples * sizeof(float));
     }
