@@ -1,7 +1,6 @@
 # Every third-party dependency, found once, from Debian's packages (scripts/install-deps.sh).
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
 find_package(OpenImageIO REQUIRED)
-find_package(JPEG REQUIRED)
 find_package(PNG REQUIRED)
 find_package(TIFF REQUIRED)
 find_package(Threads REQUIRED)
@@ -28,7 +27,7 @@ function(ptmkit_stage name)
                         ptmkit_build_flags)
 endfunction()
 
-# libjpeg (texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).
+# libjpeg (core: JPEG decoding; texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).
 find_package(JPEG REQUIRED)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
