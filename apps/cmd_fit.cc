@@ -10,6 +10,7 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/plane.h"
+#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/plan.h"
 #include "ptmkit/texture/ptm.h"
@@ -22,7 +23,10 @@ namespace ptmkit::app {
 namespace {
 
 struct FitArgs {
-  std::string lights;
+  std::vector<std::string> inputs;  // the .lp, or with --lights the photographs
+  std::string lights_file;          // --lights
+  std::string crop;                 // --crop x,y,w,h
+  std::string input_colour_space = "auto";
   std::string output;
   std::string format = "rgb";
   std::string report;
@@ -40,6 +44,19 @@ struct FitArgs {
   std::string lights_json;  // near lights: positions (--lights-json)
   std::string plane;        // near lights: sample plane (--plane)
 };
+
+// The capture's lights: the .lp with its own images, or --lights applied to the images given.
+LightSet load_lights(const FitArgs& args) {
+  if (args.lights_file.empty()) {
+    if (args.inputs.size() != 1) {
+      throw Error("fit: give one light file (.lp), or --lights LIGHTS.lp and the images (" +
+                  std::to_string(args.inputs.size()) + " arguments given)");
+    }
+    return read_lp(args.inputs[0]);
+  }
+  std::vector<fs::path> images(args.inputs.begin(), args.inputs.end());
+  return with_images(read_lp(args.lights_file), images);
+}
 
 // Checks an output map's extension before the fit runs (no work lost on a typo).
 void check_map_path(const std::string& path, const char* flag, bool png_ok) {
@@ -93,6 +110,8 @@ void run_fit(const FitArgs& args) {
       args.precision == "double" ? fit::Precision::kDouble : fit::Precision::kFloat;
   request.options.solver = fit::parse_solver(args.solver);
   request.options.progress = make_progress("fit");
+  if (!args.crop.empty()) request.options.input.crop = parse_pixel_rect(args.crop);
+  request.options.input.colour_space = parse_input_colour_space(args.input_colour_space);
   request.model = fit::parse_model_request(args.model);
   request.colour_given = args.format_given;
   request.output = args.output;
@@ -110,7 +129,7 @@ void run_fit(const FitArgs& args) {
   if (!args.labels.empty() && fs::exists(args.labels) && !fs::is_directory(args.labels)) {
     throw Error(args.labels + ": --labels must be a folder");
   }
-  LightSet lights = read_lp(args.lights);
+  LightSet lights = load_lights(args);
   if (!args.lights_json.empty()) {
     attach_light_positions(&lights, args.lights_json);
   }
@@ -131,7 +150,7 @@ void run_fit(const FitArgs& args) {
   run.fit =
       fit::fit_capture(lights, plan.options, writer.sink(), request.wants_maps ? &maps : nullptr);
   run.selection = plan.selection;
-  run.input = args.lights;
+  run.input = args.lights_file.empty() ? args.inputs[0] : args.lights_file;
   run.output = out_path;
   run.written = writer.summary();
 
@@ -163,8 +182,31 @@ void add_fit_command(CLI::App& root) {
       "fit",
       "Fit a polynomial texture map to the photographs listed in a light file (.lp): per texel, "
       "the least-squares biquadratic in the light direction. Writes a PTM 1.2 file.");
-  cmd->add_option("lights", args->lights, "Light file (.lp); its images are the capture")
+  cmd->add_option("lights", args->inputs,
+                  "Light file (.lp); its images are the capture. With --lights: the photographs, "
+                  "one per light in the light file's order")
       ->required();
+  cmd->add_option("--lights", args->lights_file,
+                  "Use this light file's lights for the images given instead of its own (a "
+                  "calibration capture's lights applied to an object's photos from the same "
+                  "rig, same order; the counts must match)");
+  cmd->add_option("--crop", args->crop,
+                  "Fit and write only this rectangle of the photos: x,y,width,height in the "
+                  "photos' pixels as displayed (x right, y down from the top-left); near lights "
+                  "and the plane keep the photos' coordinates");
+  cmd->add_option("--mask", args->options.input.mask,
+                  "Mask image of the photos' size: only its object pixels (above half of full "
+                  "scale) are fitted; the output covers the mask's bounding box (within --crop) "
+                  "and texels outside the mask are black");
+  cmd->add_option("--input-colour-space", args->input_colour_space,
+                  "What the photos' values are: auto (the files' colour metadata; without it "
+                  "8-bit files are sRGB and 16-bit and float files linear, as raw converters "
+                  "write them), srgb or linear. The choice and why go in the report")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "srgb", "linear"}));
+  cmd->add_flag("--allow-damaged-images", args->options.input.image.allow_damaged,
+                "Accept photos whose decoder reports damaged data (a truncated JPEG, corrupt "
+                "blocks) with a warning; by default they are errors");
   cmd->add_option("-o,--output", args->output,
                   "Output file: .ptm for the ptm model, .rti for hsh2/3/4")
       ->required();

@@ -1,6 +1,9 @@
 # Every third-party dependency, found once, from Debian's packages (scripts/install-deps.sh).
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
 find_package(OpenImageIO REQUIRED)
+find_package(PNG REQUIRED)
+find_package(TIFF REQUIRED)
+find_package(Threads REQUIRED)
 find_package(TBB REQUIRED)
 find_package(nlohmann_json 3.10 REQUIRED)
 find_package(CLI11 REQUIRED)
@@ -36,7 +39,7 @@ function(ptmkit_stage name)
           DESTINATION ${PTMKIT_INSTALL_CMAKEDIR})
 endfunction()
 
-# libjpeg (texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).
+# libjpeg (core: JPEG decoding; texture: the web export's planes) and cpp-httplib (apps: `ptmkit view`).
 find_package(JPEG REQUIRED)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)

@@ -40,7 +40,7 @@ fi
 # runs.
 runs="${RUNS:-3}"
 settle="${SETTLE:-0}"
-kinds="decode lrgb rgb lrgb-replace rgb-replace"
+kinds="floor decode lrgb rgb lrgb-replace rgb-replace"
 for kind in $kinds; do rm -f "$work/$kind.times"; done
 run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
   local out="$1"
@@ -63,6 +63,7 @@ bits_per_px=$(awk "BEGIN{printf \"%.2f\", $jpeg_bytes * 8 / (49 * $pixels)}")
 echo "stack: $stack: 49 images, 4000x3000x3 (JPEG $bits_per_px bits a pixel), decoded size (8-bit) $decoded_mib MiB; threads $threads; runs $runs; settle $settle s"
 for _ in $(seq "$runs"); do
   rm -f "$work/out-lrgb.ptm" "$work/out-rgb.ptm"
+  run_once "$work/floor.times" "$build/bench/jpeg_floor" "$stack/lights.lp" "$threads"
   run_once "$work/decode.times" "$build/bench/decode_stack" "$stack/lights.lp" "$threads"
   for fmt in lrgb rgb; do
     for kind in "$fmt" "$fmt-replace"; do
@@ -71,14 +72,18 @@ for _ in $(seq "$runs"); do
     done
   done
 done
+read -r floor_s floor_lo floor_hi floor_mib < <(summary "$work/floor.times")
+echo "libjpeg alone (jpeg_floor)   : ${floor_s} s (${floor_lo}-${floor_hi}), peak ${floor_mib} MiB"
 read -r dec_s dec_lo dec_hi dec_mib < <(summary "$work/decode.times")
-echo "decode only                  : ${dec_s} s (${dec_lo}-${dec_hi}), peak ${dec_mib} MiB"
+dratio=$(awk "BEGIN{printf \"%.2f\", $dec_s/$floor_s}")
+echo "decode only (StackReader)    : ${dec_s} s (${dec_lo}-${dec_hi}; ${dratio}x floor), peak ${dec_mib} MiB"
 for kind in lrgb rgb lrgb-replace rgb-replace; do
   read -r fit_s fit_lo fit_hi fit_mib < <(summary "$work/$kind.times")
   ratio=$(awk "BEGIN{printf \"%.2f\", $fit_s/$dec_s}")
+  fratio=$(awk "BEGIN{printf \"%.2f\", $fit_s/$floor_s}")
   frac=$(awk "BEGIN{printf \"%.3f\", $fit_mib/$decoded_mib}")
   what="new file"
   case "$kind" in *-replace) what="over the last" ;; esac
-  printf 'ptmkit fit --format %-4s (%s): %s s (%s-%s; %sx decode), peak %s MiB (%s of decoded stack)\n' \
-    "${kind%-replace}" "$what" "$fit_s" "$fit_lo" "$fit_hi" "$ratio" "$fit_mib" "$frac"
+  printf 'ptmkit fit --format %-4s (%s): %s s (%s-%s; %sx decode, %sx floor), peak %s MiB (%s of decoded stack)\n' \
+    "${kind%-replace}" "$what" "$fit_s" "$fit_lo" "$fit_hi" "$ratio" "$fratio" "$fit_mib" "$frac"
 done

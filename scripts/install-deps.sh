@@ -4,7 +4,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config clang-format
   libeigen3-dev libceres-dev libopencv-dev libapriltag-dev
-  libopenimageio-dev openimageio-tools libtbb-dev
+  libopenimageio-dev openimageio-tools libtbb-dev libjpeg-dev libpng-dev libtiff-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   time clang libclang-rt-14-dev
   libjpeg-dev libcpp-httplib-dev

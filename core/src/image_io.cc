@@ -3,12 +3,15 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <string>
 #include <vector>
 
-#include <OpenImageIO/imageio.h>
-
-#include "internal_oiio.h"
+#include "decoder.h"
+#include "encoder.h"
+#include "oiio_client.h"
+#include "orientation.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 
@@ -28,73 +31,64 @@ std::string_view to_string(PixelFormat format) {
   return "unknown";
 }
 
-namespace internal {
-
-std::string oiio_error(const OIIO::ImageInput* in) {
-  std::string msg = in != nullptr ? in->geterror() : OIIO::geterror();
-  if (msg.empty()) msg = OIIO::geterror();
-  while (!msg.empty() && std::isspace(static_cast<unsigned char>(msg.back()))) msg.pop_back();
-  return msg.empty() ? "unknown image error" : msg;
-}
-
-std::unique_ptr<OIIO::ImageInput> open_input(const fs::path& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(where(path) + ": image file not found");
-  if (!fs::is_regular_file(path, ec)) throw Error(where(path) + ": not a regular file");
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) throw Error(where(path) + ": cannot read image: " + oiio_error(nullptr));
-  const auto& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
-    throw Error(where(path) + ": image has no pixels");
-  }
-  if (spec.depth > 1) throw Error(where(path) + ": volume images are not supported");
-  return in;
-}
-
-ImageInfo info_from_spec(const OIIO::ImageSpec& spec) {
-  ImageInfo info;
-  info.width = spec.width;
-  info.height = spec.height;
-  info.channels = spec.nchannels;
-  const auto base = spec.format.basetype;
-  if (base == OIIO::TypeDesc::UINT8 || base == OIIO::TypeDesc::INT8) {
-    info.format = PixelFormat::kU8;
-  } else if (base == OIIO::TypeDesc::UINT16 || base == OIIO::TypeDesc::INT16) {
-    info.format = PixelFormat::kU16;
-  } else {
-    info.format = PixelFormat::kF32;
-  }
-  std::string cs = spec.get_string_attribute("oiio:ColorSpace");
-  std::transform(cs.begin(), cs.end(), cs.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (cs.find("linear") != std::string::npos) {
-    info.colour_space = ColourSpace::kLinear;
-  } else if (cs.find("srgb") != std::string::npos) {
-    info.colour_space = ColourSpace::kSRGB;
-  } else {
-    info.colour_space =
-        info.format == PixelFormat::kF32 ? ColourSpace::kLinear : ColourSpace::kSRGB;
-  }
-  return info;
-}
-
-}  // namespace internal
-
 ImageInfo probe_image(const fs::path& path) {
-  auto in = internal::open_input(path);
-  ImageInfo info = internal::info_from_spec(in->spec());
-  in->close();
-  return info;
+  return internal::info_from_header(internal::open_decoder(path)->header());
 }
 
-Image read_image(const fs::path& path) {
-  auto in = internal::open_input(path);
-  const ImageInfo info = internal::info_from_spec(in->spec());
-  Image img(info.width, info.height, info.channels, info.colour_space);
-  if (!in->read_image(0, 0, 0, info.channels, OIIO::TypeDesc::FLOAT, img.data())) {
-    throw Error(where(path) + ": cannot decode image: " + internal::oiio_error(in.get()));
+namespace {
+
+// Every stored row in the file's own sample type.
+std::vector<unsigned char> decode_all(internal::Decoder& d) {
+  std::vector<unsigned char> native(d.row_bytes() * static_cast<std::size_t>(d.header().height));
+  d.read_rows(d.header().height, native.data());
+  return native;
+}
+
+// v / 255 or v / 65535 in float, as the stack reader converts (so both give the same bits).
+template <class T>
+void to_float(const unsigned char* src, std::size_t count, float scale, float* out) {
+  const T* p = reinterpret_cast<const T*>(src);
+  for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(p[k]) / scale;
+}
+
+}  // namespace
+
+Image read_image(const fs::path& path, const ImageReadOptions& options) {
+  auto decoder = internal::open_decoder(path, {.allow_damaged = options.allow_damaged});
+  const internal::Header& h = decoder->header();
+  const ImageInfo info = internal::info_from_header(h);
+  const std::uintmax_t pixels = static_cast<std::uintmax_t>(h.width) * h.height * h.channels;
+  const std::uintmax_t need = pixels * 4 + decoder->row_bytes() * h.height;
+  const std::uintmax_t avail = internal::available_memory_bytes();
+  if (avail != 0 && need > avail) {
+    throw Error(where(path) + ": decoding this " + std::to_string(info.width) + "x" +
+                std::to_string(info.height) + " image needs " + std::to_string(need >> 20) +
+                " MiB but only " + std::to_string(avail >> 20) + " MiB are available");
   }
-  in->close();
+  const std::vector<unsigned char> native = decode_all(*decoder);
+  Image img(info.width, info.height, info.channels, info.colour_space);
+  const std::size_t sample = h.format == PixelFormat::kU8    ? 1
+                             : h.format == PixelFormat::kU16 ? 2
+                                                             : 4;
+  const std::size_t pixel_bytes = sample * static_cast<std::size_t>(h.channels);
+  std::vector<unsigned char> row(pixel_bytes * static_cast<std::size_t>(info.width));
+  const std::size_t row_samples = static_cast<std::size_t>(info.width) * h.channels;
+  for (int y = 0; y < info.height; ++y) {
+    const unsigned char* src = native.data() + static_cast<std::size_t>(y) * row.size();
+    if (h.orientation != 1) {
+      internal::displayed_row(native.data(), h.orientation, h.width, h.height, pixel_bytes, y, 0,
+                              info.width, row.data());
+      src = row.data();
+    }
+    float* dst = img.row(y);
+    if (h.format == PixelFormat::kU8) {
+      to_float<std::uint8_t>(src, row_samples, 255.0f, dst);
+    } else if (h.format == PixelFormat::kU16) {
+      to_float<std::uint16_t>(src, row_samples, 65535.0f, dst);
+    } else {
+      std::memcpy(dst, src, row_samples * sizeof(float));
+    }
+  }
   const auto n = img.size();
   for (std::size_t i = 0; i < n; ++i) {
     if (!std::isfinite(img.data()[i])) {
@@ -127,21 +121,18 @@ namespace {
 // Some encoders (PNG, TIFF) do not report a failed write (a full disk, a file size limit):
 // the written file is decoded once more before it may replace anything, so a short or
 // damaged file is an error rather than an output.
-void verify_written_image(const fs::path& temp, const fs::path& shown,
-                          const OIIO::ImageSpec& want) {
-  auto in = OIIO::ImageInput::open(temp.string());
+void verify_written_image(const fs::path& temp, const fs::path& shown, int width, int height,
+                          int channels) {
   const std::string failed = where(shown) + ": write failed: the written file does not read back";
-  if (!in) throw Error(failed + " (disk full?): " + internal::oiio_error(nullptr));
-  const OIIO::ImageSpec& got = in->spec();
-  if (got.width != want.width || got.height != want.height || got.nchannels != want.nchannels) {
+  Image back;
+  try {
+    back = read_image(temp);
+  } catch (const Error& e) {
+    throw Error(failed + " (disk full?): " + e.what());
+  }
+  if (back.width() != width || back.height() != height || back.channels() != channels) {
     throw Error(failed + " with its size (disk full?)");
   }
-  std::vector<unsigned char> buf(got.image_bytes());
-  const bool ok = in->read_image(0, 0, 0, got.nchannels, got.format, buf.data());
-  const bool error = in->has_error();
-  const std::string message = error ? in->geterror() : std::string();
-  in->close();
-  if (!ok || error) throw Error(failed + " (disk full?): " + message);
 }
 
 }  // namespace
@@ -156,48 +147,43 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
       }
     }
   }
-  AtomicOutput out_file(path);
-  auto out = OIIO::ImageOutput::create(path.string());
-  if (!out) {
-    throw Error(where(path) + ": cannot write this file type: " + internal::oiio_error(nullptr));
-  }
-  OIIO::TypeDesc type = OIIO::TypeDesc::UINT8;
-  if (options.format == PixelFormat::kU16) type = OIIO::TypeDesc::UINT16;
-  if (options.format == PixelFormat::kF32) type = OIIO::TypeDesc::FLOAT;
-  OIIO::ImageSpec spec(image.width, image.height, image.channels, type);
-  spec.attribute("oiio:ColorSpace", image.colour_space == ColourSpace::kLinear ? "Linear" : "sRGB");
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext == ".jpg" || ext == ".jpeg") {
-    if (options.format != PixelFormat::kU8) {
-      throw Error(where(path) + ": JPEG holds 8-bit samples only; use .png, .tif or .exr");
-    }
-    spec.attribute("Compression",
-                   "jpeg:" + std::to_string(std::clamp(options.jpeg_quality, 1, 100)));
+  if ((ext == ".jpg" || ext == ".jpeg") && options.format != PixelFormat::kU8) {
+    throw Error(where(path) + ": JPEG holds 8-bit samples only; use .png, .tif or .exr");
   }
-  if (ext == ".exr") {
-    spec.attribute("compression", "zip");
-    // Otherwise the writer stamps the current time (capDate): same input, different bytes.
-    spec.attribute("DateTime", "");
+  if (ext == ".png" && options.format == PixelFormat::kF32) {
+    throw Error(where(path) + ": PNG holds 8- or 16-bit samples only; use .tif or .exr for floats");
   }
-  if (!out->open(out_file.temp_path().string(), spec)) {
-    throw Error(where(path) + ": cannot open for writing: " + out->geterror());
+  if (!options.channel_names.empty() &&
+      options.channel_names.size() != static_cast<std::size_t>(image.channels)) {
+    throw Error(where(path) + ": " + std::to_string(options.channel_names.size()) +
+                " channel names for " + std::to_string(image.channels) + " channels");
   }
-  bool ok = false;
+  AtomicOutput out_file(path);
+  const void* pixels = image.data;
+  std::ptrdiff_t stride_bytes = image.stride * static_cast<std::ptrdiff_t>(sizeof(float));
+  std::vector<unsigned char> u8;
+  std::vector<unsigned short> u16;
   if (options.format == PixelFormat::kU8) {
-    auto buf = quantise<unsigned char>(image, 255.0);
-    ok = out->write_image(OIIO::TypeDesc::UINT8, buf.data());
+    u8 = quantise<unsigned char>(image, 255.0);
+    pixels = u8.data();
+    stride_bytes = image.width * image.channels;
   } else if (options.format == PixelFormat::kU16) {
-    auto buf = quantise<unsigned short>(image, 65535.0);
-    ok = out->write_image(OIIO::TypeDesc::UINT16, buf.data());
-  } else {
-    ok = out->write_image(OIIO::TypeDesc::FLOAT, image.data, OIIO::AutoStride,
-                          static_cast<OIIO::stride_t>(image.stride * sizeof(float)));
+    u16 = quantise<unsigned short>(image, 65535.0);
+    pixels = u16.data();
+    stride_bytes = image.width * image.channels * 2;
   }
-  if (!ok) throw Error(where(path) + ": write failed: " + out->geterror());
-  if (!out->close()) throw Error(where(path) + ": write failed: " + out->geterror());
-  verify_written_image(out_file.temp_path(), path, spec);
+  if (ext == ".png") {
+    internal::write_png(path, out_file.temp_path(), image.width, image.height, image.channels,
+                        options.format == PixelFormat::kU16, pixels, image.colour_space);
+  } else {
+    internal::oiio_write(path, out_file.temp_path(), image.width, image.height, image.channels,
+                         options.format, pixels, stride_bytes, image.colour_space,
+                         std::clamp(options.jpeg_quality, 1, 100), options.channel_names);
+  }
+  verify_written_image(out_file.temp_path(), path, image.width, image.height, image.channels);
   out_file.commit();
 }
 

@@ -4,29 +4,78 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <string>
 
 #include <tbb/parallel_for.h>
+#include <nlohmann/json.hpp>
 
-#include "internal_oiio.h"
+#include "decoder.h"
+#include "orientation.h"
 #include "ptmkit/core/error.h"
 
 namespace fs = std::filesystem;
 
 namespace ptmkit {
 
+PixelRect parse_pixel_rect(const std::string& text) {
+  PixelRect r;
+  long long v[4] = {};
+  std::size_t pos = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::size_t end = i < 3 ? text.find(',', pos) : text.size();
+    if (end == std::string::npos) {
+      throw Error("'" + excerpt(text) + "': expected x,y,width,height (four integers)");
+    }
+    const std::string part = text.substr(pos, end - pos);
+    char* stop = nullptr;
+    v[i] = std::strtoll(part.c_str(), &stop, 10);
+    if (part.empty() || stop == nullptr || *stop != '\0' || v[i] < 0 || v[i] > kMaxImageSidePx) {
+      throw Error("'" + excerpt(text) + "': expected x,y,width,height (four integers >= 0)");
+    }
+    pos = end + 1;
+  }
+  if (v[2] < 1 || v[3] < 1) {
+    throw Error("'" + excerpt(text) + "': width and height must be at least 1");
+  }
+  r.x = static_cast<int>(v[0]);
+  r.y = static_cast<int>(v[1]);
+  r.width = static_cast<int>(v[2]);
+  r.height = static_cast<int>(v[3]);
+  return r;
+}
+
+InputColourSpace parse_input_colour_space(const std::string& text) {
+  if (text == "auto") return InputColourSpace::kAuto;
+  if (text == "srgb" || text == "sRGB") return InputColourSpace::kSRGB;
+  if (text == "linear") return InputColourSpace::kLinear;
+  throw Error("input colour space must be auto, srgb or linear, not '" + excerpt(text) + "'");
+}
+
+std::string StackInputSummary::to_json() const {
+  nlohmann::json j;
+  j["photo_size"] = {full_width, full_height};
+  j["region"] = {
+      {"x", region.x}, {"y", region.y}, {"width", region.width}, {"height", region.height}};
+  j["orientation"] = orientation;
+  j["orientation_name"] = std::string(orientation_name(orientation));
+  j["colour_space"] = std::string(to_string(colour_space));
+  j["colour_space_source"] = colour_space_source;
+  j["codec"] = codec;
+  if (!mask.empty()) {
+    j["mask"] = mask;
+    j["masked_out_texels"] = masked_out_texels;
+  }
+  return j.dump();
+}
+
 namespace {
 
-int colour_channels(const OIIO::ImageSpec& spec) { return sample_channels(spec.nchannels); }
+std::size_t sample_bytes(PixelFormat f) {
+  return f == PixelFormat::kU8 ? 1 : f == PixelFormat::kU16 ? 2 : 4;
+}
 
-}  // namespace
-
-namespace {
-
-// Decoding straight to float through OpenImageIO runs its generic per-sample converter, which
-// cost more than the JPEG decoding itself (measured: 29% of a whole fit's CPU). Integer files
-// are read in their own type and converted here: a table for 8-bit (the same values, v / 255),
-// a division for 16-bit.
+// 8-bit to float: a table (the same values as v / 255).
 const std::array<float, 256>& u8_to_float() {
   static const std::array<float, 256> table = [] {
     std::array<float, 256> t{};
@@ -36,96 +85,240 @@ const std::array<float, 256>& u8_to_float() {
   return table;
 }
 
-// Rows [y0, y1) in the file's own sample type. OpenImageIO's read_scanlines allocates (and
-// frees) a 64 MiB staging buffer on every call; at 49 images x 375 bands that was 18 000
-// mmap/munmap pairs whose TLB shootdowns cost a quarter of a 12 MP fit's CPU. When the file's
-// layout is already what the band wants (scanline file, one sample type, every channel), the
-// native reader fills our buffer directly.
-bool read_rows_native(OIIO::ImageInput& in, int y0, int y1, int channels, OIIO::TypeDesc type,
-                      void* out) {
-  const auto& spec = in.spec();
-  if (spec.tile_width == 0 && spec.channelformats.empty() && spec.nchannels == channels &&
-      spec.format == type) {
-    const OIIO::ImageInput::lock_guard guard(in);
-    return in.read_native_scanlines(0, 0, y0, y1, 0, out);
-  }
-  return in.read_scanlines(0, 0, y0, y1, 0, 0, channels, type, out);
-}
+// One image of the stack: its decoder, and for orientations other than 1 the whole stored image.
+struct Source {
+  std::unique_ptr<internal::Decoder> decoder;
+  std::vector<unsigned char> stored;  // whole image (orientation != 1), else one band of rows
+  int next_stored_row = 0;            // orientation 1: next row the decoder gives
+  std::vector<unsigned char> rows;    // orientation 1: scratch for a band of stored rows
+  std::vector<unsigned char> row;     // orientation != 1: one displayed row
+};
 
-bool read_rows_as_float(OIIO::ImageInput& in, int y0, int y1, int channels,
-                        std::vector<unsigned char>* scratch, float* out) {
-  const std::size_t count =
-      static_cast<std::size_t>(y1 - y0) * static_cast<std::size_t>(in.spec().width) * channels;
-  const auto base = in.spec().format.basetype;
-  if (base == OIIO::TypeDesc::UINT8) {
-    scratch->resize(count);
-    if (!read_rows_native(in, y0, y1, channels, OIIO::TypeDesc::UINT8, scratch->data())) {
-      return false;
-    }
-    const auto& table = u8_to_float();
-    const unsigned char* src = scratch->data();
-    for (std::size_t k = 0; k < count; ++k) out[k] = table[src[k]];
-    return true;
-  }
-  if (base == OIIO::TypeDesc::UINT16) {
-    scratch->resize(count * 2);
-    if (!read_rows_native(in, y0, y1, channels, OIIO::TypeDesc::UINT16, scratch->data())) {
-      return false;
-    }
-    const auto* src = reinterpret_cast<const std::uint16_t*>(scratch->data());
-    for (std::size_t k = 0; k < count; ++k) out[k] = static_cast<float>(src[k]) / 65535.0f;
-    return true;
-  }
-  return read_rows_native(in, y0, y1, channels, OIIO::TypeDesc::FLOAT, out);
-}
+std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
 }  // namespace
 
 struct StackReader::Impl {
   std::vector<fs::path> files;
-  std::vector<std::unique_ptr<OIIO::ImageInput>> inputs;
-  std::vector<std::vector<unsigned char>> scratch;  // per image: native samples of a band
+  std::vector<Source> sources;
   ImageInfo info;
-  int channels = 0;
-  int next_row = 0;
+  StackInputSummary summary;
+  int channels = 0;  // colour channels read
+  bool all_u8 = true;
+  int next_row = 0;                // in the region
+  std::vector<std::uint8_t> mask;  // region-sized, 1 = object; empty = no mask
+
+  // Fills `dst` (rows x region width x channels, band layout) from image i. Samples are
+  // written as bytes (u8 != nullptr) or floats.
+  void read_image_rows(std::size_t i, int y0, int n_rows, std::uint8_t* u8, float* f32);
 };
 
-StackReader::StackReader(std::vector<fs::path> files) : impl_(std::make_unique<Impl>()) {
+void StackReader::Impl::read_image_rows(std::size_t i, int y0, int n_rows, std::uint8_t* u8,
+                                        float* f32) {
+  Source& s = sources[i];
+  const internal::Header& h = s.decoder->header();
+  const std::size_t sb = sample_bytes(h.format);
+  const std::size_t pixel_bytes = sb * static_cast<std::size_t>(h.channels);
+  const PixelRect& r = summary.region;
+  const std::size_t out_row =
+      static_cast<std::size_t>(r.width) * static_cast<std::size_t>(channels);
+  // Source rows (in the file's sample type, file channels) of the region's columns, one at a
+  // time, converted into the band.
+  const bool same_layout = h.channels == channels;
+  const auto emit = [&](const unsigned char* src, int row_in_band) {
+    const std::size_t base = static_cast<std::size_t>(row_in_band) * out_row;
+    if (same_layout && h.format == PixelFormat::kU8) {
+      if (u8 != nullptr) {
+        std::memcpy(u8 + base, src, out_row);
+      } else {
+        const auto& table = u8_to_float();
+        for (std::size_t k = 0; k < out_row; ++k) f32[base + k] = table[src[k]];
+      }
+      return;
+    }
+    for (int x = 0; x < r.width; ++x) {
+      const unsigned char* px = src + static_cast<std::size_t>(x) * pixel_bytes;
+      for (int c = 0; c < channels; ++c) {
+        const std::size_t k = base + static_cast<std::size_t>(x) * channels + c;
+        if (h.format == PixelFormat::kU8) {
+          if (u8 != nullptr) {
+            u8[k] = px[c];
+          } else {
+            f32[k] = u8_to_float()[px[c]];
+          }
+        } else if (h.format == PixelFormat::kU16) {
+          std::uint16_t v = 0;
+          std::memcpy(&v, px + 2 * static_cast<std::size_t>(c), 2);
+          f32[k] = static_cast<float>(v) / 65535.0f;
+        } else {
+          std::memcpy(&f32[k], px + 4 * static_cast<std::size_t>(c), 4);
+        }
+      }
+    }
+  };
+  if (h.orientation == 1) {
+    const int first = r.y + y0;
+    // Rows above the region (or skipped) are decoded and dropped: JPEG and most TIFFs cannot
+    // seek to a row.
+    const std::size_t row_bytes = s.decoder->row_bytes();
+    while (s.next_stored_row < first) {
+      const int skip = std::min(first - s.next_stored_row, 64);
+      s.rows.resize(row_bytes * static_cast<std::size_t>(skip));
+      s.decoder->read_rows(skip, s.rows.data());
+      s.next_stored_row += skip;
+    }
+    // The common case, 8-bit rows read whole into an 8-bit band: straight into the band.
+    if (u8 != nullptr && same_layout && r.x == 0 && r.width == h.width) {
+      s.decoder->read_rows(n_rows, u8);
+      s.next_stored_row += n_rows;
+      return;
+    }
+    s.rows.resize(row_bytes * static_cast<std::size_t>(n_rows));
+    s.decoder->read_rows(n_rows, s.rows.data());
+    s.next_stored_row += n_rows;
+    for (int k = 0; k < n_rows; ++k) {
+      emit(s.rows.data() + row_bytes * static_cast<std::size_t>(k) +
+               static_cast<std::size_t>(r.x) * pixel_bytes,
+           k);
+    }
+    return;
+  }
+  if (s.stored.empty()) {
+    s.stored.resize(s.decoder->row_bytes() * static_cast<std::size_t>(h.height));
+    s.decoder->read_rows(h.height, s.stored.data());
+  }
+  s.row.resize(pixel_bytes * static_cast<std::size_t>(r.width));
+  for (int k = 0; k < n_rows; ++k) {
+    internal::displayed_row(s.stored.data(), h.orientation, h.width, h.height, pixel_bytes,
+                            r.y + y0 + k, r.x, r.width, s.row.data());
+    emit(s.row.data(), k);
+  }
+  if (y0 + n_rows >= r.height) {
+    s.stored.clear();
+    s.stored.shrink_to_fit();
+  }
+}
+
+StackReader::StackReader(std::vector<fs::path> files, const StackReadOptions& options)
+    : impl_(std::make_unique<Impl>()) {
   if (files.empty()) throw Error("capture stack is empty: no images to read");
   impl_->files = std::move(files);
-  impl_->inputs.resize(impl_->files.size());
-  impl_->scratch.resize(impl_->files.size());
+  impl_->sources.resize(impl_->files.size());
+  const internal::DecodeSettings settings{.allow_damaged = options.image.allow_damaged};
   for (std::size_t i = 0; i < impl_->files.size(); ++i) {
     const fs::path& f = impl_->files[i];
-    impl_->inputs[i] = internal::open_input(f);
-    const auto& spec = impl_->inputs[i]->spec();
+    impl_->sources[i].decoder = internal::open_decoder(f, settings);
+    const internal::Header& h = impl_->sources[i].decoder->header();
+    const ImageInfo info = internal::info_from_header(h);
+    if (h.format != PixelFormat::kU8) impl_->all_u8 = false;
     if (i == 0) {
-      impl_->info = internal::info_from_spec(spec);
-      impl_->channels = colour_channels(spec);
+      impl_->info = info;
+      impl_->channels = sample_channels(h.channels);
+      impl_->summary.codec = h.codec;
       continue;
     }
     const ImageInfo& first = impl_->info;
-    if (spec.width != first.width || spec.height != first.height) {
-      throw Error(where(f) + ": image is " + std::to_string(spec.width) + "x" +
-                  std::to_string(spec.height) + " but " + impl_->files[0].filename().string() +
-                  " is " + std::to_string(first.width) + "x" + std::to_string(first.height) +
+    const std::string first_name = excerpt(impl_->files[0].filename().string());
+    if (info.orientation != first.orientation) {
+      throw Error(where(f) + ": EXIF orientation " + std::to_string(info.orientation) + " (" +
+                  std::string(orientation_name(info.orientation)) + ") but " + first_name +
+                  " has " + std::to_string(first.orientation) + " (" +
+                  std::string(orientation_name(first.orientation)) +
+                  "); every photo of a capture must be taken in the same orientation (the "
+                  "camera was turned between shots?)");
+    }
+    if (info.width != first.width || info.height != first.height) {
+      throw Error(where(f) + ": image is " + size_text(info.width, info.height) + " but " +
+                  first_name + " is " + size_text(first.width, first.height) +
                   "; every image of a capture must have the same size");
     }
-    if (colour_channels(spec) != impl_->channels) {
-      throw Error(where(f) + ": image has " + std::to_string(colour_channels(spec)) +
-                  " colour channel(s) but " + impl_->files[0].filename().string() + " has " +
-                  std::to_string(impl_->channels));
+    if (sample_channels(h.channels) != impl_->channels) {
+      throw Error(
+          where(f) + ": image has " + std::to_string(sample_channels(h.channels)) +
+          " colour channel(s) but " + first_name + " has " + std::to_string(impl_->channels));
     }
+  }
+  StackInputSummary& sum = impl_->summary;
+  sum.full_width = impl_->info.width;
+  sum.full_height = impl_->info.height;
+  sum.orientation = impl_->info.orientation;
+  PixelRect region{0, 0, sum.full_width, sum.full_height};
+  if (options.crop) {
+    const PixelRect& c = *options.crop;
+    if (c.width < 1 || c.height < 1 || c.x < 0 || c.y < 0 ||
+        static_cast<long long>(c.x) + c.width > sum.full_width ||
+        static_cast<long long>(c.y) + c.height > sum.full_height) {
+      throw Error("crop " + std::to_string(c.x) + "," + std::to_string(c.y) + "," +
+                  std::to_string(c.width) + "," + std::to_string(c.height) +
+                  " does not lie inside the photos (" + size_text(sum.full_width, sum.full_height) +
+                  " as displayed, e.g. " + excerpt(impl_->files[0].filename().string()) + ")");
+    }
+    region = c;
+  }
+  if (!options.mask.empty()) {
+    const Image mask = read_image(options.mask, options.image);
+    if (mask.width() != sum.full_width || mask.height() != sum.full_height) {
+      throw Error(where(options.mask) + ": mask is " + size_text(mask.width(), mask.height()) +
+                  " but the photos are " + size_text(sum.full_width, sum.full_height) +
+                  " (as displayed); the mask must cover the whole photo");
+    }
+    int x0 = region.x + region.width, y0 = region.y + region.height, x1 = region.x - 1,
+        y1 = region.y - 1;
+    for (int y = region.y; y < region.y + region.height; ++y) {
+      for (int x = region.x; x < region.x + region.width; ++x) {
+        if (mask.at(x, y, 0) > 0.5f) {
+          x0 = std::min(x0, x);
+          x1 = std::max(x1, x);
+          y0 = std::min(y0, y);
+          y1 = std::max(y1, y);
+        }
+      }
+    }
+    if (x1 < x0) {
+      throw Error(where(options.mask) + ": the mask selects no pixel" +
+                  std::string(options.crop ? " inside the crop" : "") +
+                  " (object pixels are those above half of full scale)");
+    }
+    region = {x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+    impl_->mask.resize(static_cast<std::size_t>(region.width) * region.height);
+    for (int y = 0; y < region.height; ++y) {
+      for (int x = 0; x < region.width; ++x) {
+        const bool in = mask.at(region.x + x, region.y + y, 0) > 0.5f;
+        impl_->mask[static_cast<std::size_t>(y) * region.width + x] = in ? 1 : 0;
+        if (!in) ++sum.masked_out_texels;
+      }
+    }
+    sum.mask = options.mask.string();
+  }
+  sum.region = region;
+  switch (options.colour_space) {
+    case InputColourSpace::kAuto:
+      sum.colour_space = impl_->info.colour_space;
+      sum.colour_space_source = impl_->info.colour_evidence;
+      break;
+    case InputColourSpace::kSRGB:
+      sum.colour_space = ColourSpace::kSRGB;
+      sum.colour_space_source = "--input-colour-space srgb";
+      break;
+    case InputColourSpace::kLinear:
+      sum.colour_space = ColourSpace::kLinear;
+      sum.colour_space_source = "--input-colour-space linear";
+      break;
+  }
+  impl_->info.colour_space = sum.colour_space;
+  if (options.colour_space != InputColourSpace::kAuto) {
+    impl_->info.colour_evidence = sum.colour_space_source;
   }
 }
 
 StackReader::~StackReader() = default;
 
-int StackReader::width() const { return impl_->info.width; }
-int StackReader::height() const { return impl_->info.height; }
+int StackReader::width() const { return impl_->summary.region.width; }
+int StackReader::height() const { return impl_->summary.region.height; }
 int StackReader::channels() const { return impl_->channels; }
 int StackReader::count() const { return static_cast<int>(impl_->files.size()); }
 const ImageInfo& StackReader::info() const { return impl_->info; }
+const StackInputSummary& StackReader::summary() const { return impl_->summary; }
 const std::vector<fs::path>& StackReader::files() const { return impl_->files; }
 
 bool StackReader::read_band(int rows, StackBand* band, BandStorage storage) {
@@ -138,7 +331,7 @@ bool StackReader::read_band(int rows, StackBand* band, BandStorage storage) {
   band->width = width();
   band->channels = channels();
   band->images = count();
-  band->is_u8 = storage == BandStorage::kNative8 && impl_->info.format == PixelFormat::kU8;
+  band->is_u8 = storage == BandStorage::kNative8 && impl_->all_u8;
   if (band->is_u8) {
     band->bytes.resize(band->image_stride() * band->images);
     band->samples = {};
@@ -147,31 +340,56 @@ bool StackReader::read_band(int rows, StackBand* band, BandStorage storage) {
     band->bytes = {};
   }
 
-  std::vector<std::string> errors(impl_->inputs.size());
-  tbb::parallel_for(std::size_t{0}, impl_->inputs.size(), [&](std::size_t i) {
-    auto& in = impl_->inputs[i];
-    const bool ok =
-        band->is_u8 ? read_rows_native(*in, y0, y0 + n_rows, band->channels, OIIO::TypeDesc::UINT8,
-                                       band->bytes.data() + i * band->image_stride())
-                    : read_rows_as_float(*in, y0, y0 + n_rows, band->channels, &impl_->scratch[i],
-                                         band->image(static_cast<int>(i)));
-    if (!ok) errors[i] = internal::oiio_error(in.get());
+  std::vector<std::string> errors(impl_->sources.size());
+  tbb::parallel_for(std::size_t{0}, impl_->sources.size(), [&](std::size_t i) {
+    try {
+      std::uint8_t* u8 = band->is_u8 ? band->bytes.data() + i * band->image_stride() : nullptr;
+      float* f32 = band->is_u8 ? nullptr : band->image(static_cast<int>(i));
+      impl_->read_image_rows(i, y0, n_rows, u8, f32);
+    } catch (const Error& e) {
+      errors[i] = e.what();
+    }
   });
   // Report the first failing file in stack order, whatever thread saw it first.
-  for (std::size_t i = 0; i < errors.size(); ++i) {
-    if (!errors[i].empty()) {
-      throw Error(where(impl_->files[i]) + ": cannot decode rows " + std::to_string(y0) + ".." +
-                  std::to_string(y0 + n_rows - 1) + ": " + errors[i]);
-    }
+  for (const std::string& e : errors) {
+    if (!e.empty()) throw Error(e);
   }
   // Integer files cannot hold NaN; float files can, and one NaN would poison a whole fit.
-  if (impl_->info.format == PixelFormat::kF32) {
+  if (!band->is_u8) {
     for (int i = 0; i < band->images; ++i) {
+      if (impl_->sources[static_cast<std::size_t>(i)].decoder->header().format !=
+          PixelFormat::kF32) {
+        continue;
+      }
       const float* p = band->image(i);
       for (std::size_t k = 0; k < band->image_stride(); ++k) {
         if (!std::isfinite(p[k])) {
-          throw Error(where(impl_->files[i]) + ": NaN or infinite sample in row " +
-                      std::to_string(y0 + static_cast<int>(k / (band->width * band->channels))));
+          throw Error(where(impl_->files[static_cast<std::size_t>(i)]) +
+                      ": NaN or infinite sample in row " +
+                      std::to_string(impl_->summary.region.y + y0 +
+                                     static_cast<int>(k / (band->width * band->channels))));
+        }
+      }
+    }
+  }
+  // Texels outside the mask: 0 in every image.
+  if (!impl_->mask.empty()) {
+    const std::size_t w = static_cast<std::size_t>(band->width);
+    const std::size_t ch = static_cast<std::size_t>(band->channels);
+    for (int i = 0; i < band->images; ++i) {
+      for (int r = 0; r < n_rows; ++r) {
+        const std::uint8_t* m = impl_->mask.data() + static_cast<std::size_t>(y0 + r) * w;
+        const std::size_t base = band->image_stride() * static_cast<std::size_t>(i) +
+                                 static_cast<std::size_t>(r) * w * ch;
+        for (std::size_t x = 0; x < w; ++x) {
+          if (m[x] != 0) continue;
+          for (std::size_t c = 0; c < ch; ++c) {
+            if (band->is_u8) {
+              band->bytes[base + x * ch + c] = 0;
+            } else {
+              band->samples[base + x * ch + c] = 0.0f;
+            }
+          }
         }
       }
     }
@@ -180,8 +398,8 @@ bool StackReader::read_band(int rows, StackBand* band, BandStorage storage) {
   return true;
 }
 
-std::vector<Image> read_stack(const std::vector<fs::path>& files) {
-  StackReader reader(files);
+std::vector<Image> read_stack(const std::vector<fs::path>& files, const StackReadOptions& options) {
+  StackReader reader(files, options);
   std::vector<Image> images;
   images.reserve(files.size());
   for (int i = 0; i < reader.count(); ++i) {
@@ -191,7 +409,8 @@ std::vector<Image> read_stack(const std::vector<fs::path>& files) {
   StackBand band;
   while (reader.read_band(64, &band)) {
     for (int i = 0; i < band.images; ++i) {
-      std::copy_n(band.image(i), band.image_stride(), images[i].row(band.y0));
+      std::copy_n(band.image(i), band.image_stride(),
+                  images[static_cast<std::size_t>(i)].row(band.y0));
     }
   }
   return images;

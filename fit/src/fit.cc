@@ -77,6 +77,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
     if (!r.light_model.note.empty()) lm["note"] = r.light_model.note;
     j["light_model"] = lm;
   }
+  if (r.input.full_width > 0) j["images"] = nlohmann::json::parse(r.input.to_json());
   j["threads"] = r.threads;
   j["timings_s"] = {{"decode", r.decode_seconds},
                     {"fit", r.fit_seconds},

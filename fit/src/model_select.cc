@@ -296,7 +296,7 @@ std::string ModelReport::to_json() const {
 
 ModelReport select_model(const LightSet& lights, const ModelSelectOptions& options) {
   if (const std::string p = options.validate(); !p.empty()) throw Error(p);
-  StackReader reader(lights.images());
+  StackReader reader(lights.images(), options.input);
   const int w = reader.width();
   const int h = reader.height();
   const int ch = reader.channels();

@@ -193,6 +193,12 @@ struct OpenedSource {
   int height = 0;
   int channels = 0;
   ColourSpace colour_space = ColourSpace::kSRGB;
+  // Photo pixel of the first texel (a crop or mask box); the light model's plane maps photo
+  // pixels, of a photo full_width x full_height.
+  int origin_x = 0;
+  int origin_y = 0;
+  int full_width = 0;
+  int full_height = 0;
   // Float files are not clipped at full scale (HDR): no sample is "saturated".
   bool unclipped = false;
   BandSource next;
@@ -224,7 +230,7 @@ FitReport fit_source(const Designs& designs, const LightModelSetup& light_model,
                      const FitOptions& options, const OpenedSource& source, CoefficientSink& sink,
                      FitOutputs* outputs) {
   const auto t0 = Clock::now();
-  light_model.check_size(source.width, source.height);
+  light_model.check_size(source.full_width, source.full_height);
   FitOptions run_options = options;
   if (source.unclipped) {
     run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
@@ -237,6 +243,8 @@ FitReport fit_source(const Designs& designs, const LightModelSetup& light_model,
   setup.channels = source.channels;
   setup.colour_space = source.colour_space;
   setup.near = light_model.fit(run_options);
+  setup.near.origin_x = source.origin_x;
+  setup.near.origin_y = source.origin_y;
   // Other bases deliver luminance fits multiplied out (core/coefficients.h).
   setup.layout = {source.width, source.height, options.basis,
                   ptm ? options.model : ColourModel::kRGB, source.colour_space};
@@ -287,6 +295,8 @@ FitReport fit_in_memory(const std::vector<Image>& images,
   source.height = images[0].height();
   source.channels = sample_channels(images[0].channels());
   source.colour_space = images[0].colour_space();
+  source.full_width = source.width;
+  source.full_height = source.height;
   int next_row = 0;
   source.next = [&](int rows, StackBand* band) {
     try {
@@ -323,10 +333,14 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
   const LightModelSetup light_model = light_model_setup(lights, options);
   FitReport report;
   {
-    StackReader reader(lights.images());
+    StackReader reader(lights.images(), options.input);
     OpenedSource source;
     source.width = reader.width();
     source.height = reader.height();
+    source.origin_x = reader.origin_x();
+    source.origin_y = reader.origin_y();
+    source.full_width = reader.summary().full_width;
+    source.full_height = reader.summary().full_height;
     source.channels = reader.channels();
     source.colour_space = reader.info().colour_space;
     source.unclipped = reader.info().format == PixelFormat::kF32;
@@ -334,6 +348,7 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
       return reader.read_band(rows, band, BandStorage::kNative8);
     };
     report = fit_source(designs, light_model, options, source, sink, outputs);
+    report.input = reader.summary();
   }  // images closed before the sink finishes
   finish_sink(sink, &report);
   return report;

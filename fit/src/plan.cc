@@ -69,6 +69,7 @@ FitPlan plan_fit(const LightSet& lights, const FitRequest& request) {
   if (request.model == ModelRequest::kAuto) {
     ModelSelectOptions sel;
     sel.design = request.options.design;
+    sel.input = request.options.input;
     if (request.colour_given) sel.colours = {request.options.model};
     plan.selection = select_model(lights, sel);
     basis = plan.selection->choice().basis;

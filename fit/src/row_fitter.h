@@ -31,6 +31,9 @@ struct NearFit {
   const NearLightModel* model = nullptr;
   bool falloff = false;
   double ridge_lambda = 0.0;  // relative to the number of lights, as DesignOptions'
+  // Photo pixel of texel (0, 0) (a crop or mask box): the plane maps photo pixels.
+  int origin_x = 0;
+  int origin_y = 0;
 };
 
 // What every row fitter knows about the fit.

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace ptmkit {
 
@@ -16,7 +17,16 @@ class Error : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// "FILE: message" or "FILE:LINE: message" (line is 1-based; 0 means no line).
+// "FILE: message" or "FILE:LINE: message" (line is 1-based; 0 means no line). The file name
+// goes through excerpt(): a name of megabytes or with control bytes is never echoed whole.
 [[nodiscard]] std::string where(const std::filesystem::path& file, int line = 0);
+
+// Longest excerpt of an input that a message quotes, in bytes.
+inline constexpr std::size_t kMaxExcerptBytes = 120;
+
+// A short, printable excerpt of untrusted text or bytes for an error message: bytes outside
+// printable ASCII become \xNN, and past kMaxExcerptBytes the middle is replaced by
+// "...(N bytes)..." keeping the start and the end (where a file name's distinguishing part is).
+[[nodiscard]] std::string excerpt(std::string_view text);
 
 }  // namespace ptmkit

@@ -1,12 +1,27 @@
-// Reading and writing image files through OpenImageIO.
+// Reading and writing image files.
 //
-// In: PNG, JPEG, TIFF, EXR (and whatever else OpenImageIO reads), 8- and 16-bit integer or
-// float samples. Out: PNG, TIFF, EXR (JPEG too, lossy). Writes are atomic: the image goes to
-// a temporary file beside the target, then is renamed over it, so a failed write leaves no
-// partial file. Every failure throws ptmkit::Error naming the file.
+// In: JPEG (libjpeg-turbo), PNG (libpng) and TIFF (libtiff; 8/16-bit integer and 32-bit float
+// strips) are decoded directly; everything else - EXR, camera RAW through LibRaw, TIFF
+// layouts the direct reader does not take, and any other format OpenImageIO reads - goes
+// through OpenImageIO, loaded as a separate module (ptmkit_oiio) only when such a file is met,
+// so commands that read the common formats start without its hundreds of libraries. The
+// decoder is chosen by the file's first bytes, not its extension.
+//
+// Out: PNG directly (libpng); TIFF, EXR and JPEG through the OpenImageIO module. Writes are
+// atomic: the image goes to a temporary file beside the target and is renamed over it only
+// after the encoder and the close (flush) reported success, so a failed write - a full disk
+// included - leaves no partial file. Every failure throws ptmkit::Error naming the file.
+//
+// Inputs are bounded before they are trusted: declared dimensions are checked against the
+// limits below (and, for JPEG and PNG, against what the file's size can hold) before any pixel
+// memory is allocated, and a decoder's warning about damaged data (a truncated JPEG, corrupt
+// entropy-coded data, a bad PNG checksum) is an error unless ImageReadOptions::allow_damaged.
 #pragma once
 
 #include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
 
 #include "ptmkit/core/image.h"
 
@@ -16,21 +31,49 @@ namespace ptmkit {
 enum class PixelFormat { kU8, kU16, kF32 };
 [[nodiscard]] std::string_view to_string(PixelFormat format);
 
+// Largest width or height accepted, in pixels (JPEG's own limit is 65500; gigapixel TIFFs of
+// paintings stay below this).
+inline constexpr long long kMaxImageSidePx = 1LL << 18;  // 262144
+// Largest pixel count of one image: 2^32 (4.3 gigapixels; a 1-gigapixel capture fits 4 times).
+inline constexpr long long kMaxImagePixels = 1LL << 32;
+
+struct ImageReadOptions {
+  // Accept images whose decoder reports damaged data (a truncated JPEG is completed with grey,
+  // corrupt blocks are filled) with a warning on stderr, instead of an error. For damaged
+  // archives; a fit of such images fits the filler too.
+  bool allow_damaged = false;
+};
+
 struct ImageInfo {
   int width = 0;
   int height = 0;
   int channels = 0;
   PixelFormat format = PixelFormat::kU8;
-  // From the file's metadata where it says; otherwise integer files are taken as sRGB and
-  // float files as linear (what cameras and renderers write).
+  // From the file's metadata where it says (PNG sRGB/gAMA/iCCP chunks, an ICC profile, EXIF
+  // ColorSpace); otherwise by sample type: 8-bit files are sRGB (what cameras write in JPEG,
+  // and what 8-bit PNGs are by convention), 16-bit and float files are linear (what raw
+  // converters write without a profile: `dcraw -4`, LibRaw's 16-bit linear output, and
+  // photometric-stereo data sets; renderers' float output).
   ColourSpace colour_space = ColourSpace::kSRGB;
+  // Whether colour_space came from the file's metadata, and which.
+  bool colour_from_metadata = false;
+  std::string colour_evidence;  // e.g. "PNG sRGB chunk", "16-bit, no colour metadata"
+  // EXIF/TIFF orientation, 1..8 (1: stored as displayed). read_image() and the stack reader
+  // apply it, so width and height here are as displayed (swapped for 5..8).
+  int orientation = 1;
 };
 
-// Header only: size, channels, sample type, colour space.
+// Human-readable name of an EXIF orientation code ("rotate 90 CW", ...).
+[[nodiscard]] std::string_view orientation_name(int orientation);
+
+// Header only: size (as displayed), channels, sample type, colour space, orientation.
 [[nodiscard]] ImageInfo probe_image(const std::filesystem::path& path);
 
-// The whole image as floats (integers normalised to 0..1), all channels.
-[[nodiscard]] Image read_image(const std::filesystem::path& path);
+// The whole image as floats (integers normalised to 0..1), all channels, turned upright by
+// its EXIF orientation. Refuses (before decoding) an image whose float copy would not fit in
+// the memory the system reports available.
+[[nodiscard]] Image read_image(const std::filesystem::path& path,
+                               const ImageReadOptions& options = {});
 
 struct ImageWriteOptions {
   // Sample type written. Integer formats clamp to [0, 1] and round to nearest.
@@ -38,6 +81,9 @@ struct ImageWriteOptions {
   PixelFormat format = PixelFormat::kU8;
   // JPEG quality 1..100, used only for .jpg.
   int jpeg_quality = 95;
+  // Channel names (EXR only; empty = R, G, B, A or Y). OpenEXR sorts channels by name, so
+  // names that sort in the intended order keep the layout on reading back.
+  std::vector<std::string> channel_names = {};
 };
 
 // Writes `image` atomically; the view's colour space is recorded in the file's metadata.

@@ -6,6 +6,7 @@
 // to give every texel its own direction when the plane geometry is known.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -45,6 +46,16 @@ struct LightSet {
 // that does not parse, NaN or infinite components, a zero vector, a direction with z <= 0,
 // a duplicate image, a count that does not match, no entries.
 [[nodiscard]] LightSet read_lp(const std::filesystem::path& path);
+// Largest .lp read (bytes): 16 MiB is 200 000 lights' lines; anything larger, and anything
+// that is not a regular file, is refused before it is read.
+inline constexpr std::uintmax_t kMaxLightFileBytes = 16u << 20;
+
+// The lights of one capture applied to the photographs of another taken on the same rig in
+// the same order (a light file calibrated from a chrome-sphere capture, used for an object's
+// photos): light i gets images[i]; directions, positions and intensities are kept. Throws
+// ptmkit::Error naming the light file when the counts differ or an image is listed twice.
+[[nodiscard]] LightSet with_images(const LightSet& lights,
+                                   const std::vector<std::filesystem::path>& images);
 
 struct LpWriteOptions {
   bool count_line = true;  // write the count as the first line (most tools expect it)

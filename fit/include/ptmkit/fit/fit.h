@@ -26,6 +26,7 @@
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/parallel.h"
+#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/design.h"
 #include "ptmkit/fit/near_light.h"
@@ -99,6 +100,10 @@ struct FitOptions {
   // light must have a position_mm, the solver must be ls or ridge, and `precision` is ignored
   // (per-texel solves are in double).
   NearLightOptions near;
+  // How the photographs are read (fit_capture only): a crop or mask (only that region is
+  // fitted and written; the near-light geometry and the plane keep the photos' pixel
+  // coordinates), the colour space they are taken to be in, damaged files accepted or not.
+  StackReadOptions input;
 
   // Empty if valid, else what is wrong.
   [[nodiscard]] std::string validate() const;
@@ -142,6 +147,8 @@ struct FitReport {
   // The light model used: distant (shared matrix) or near (per-texel), its direction spread
   // and fall-off range over the field.
   NearLightReport light_model;
+  // How the images were read (fit_capture): region, orientation, colour space and why.
+  StackInputSummary input;
   int threads = 0;
   // Wall-clock seconds. Decoding and fitting overlap, so decode + fit can exceed total.
   double decode_seconds = 0.0;  // summed over bands

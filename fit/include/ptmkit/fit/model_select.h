@@ -24,6 +24,7 @@
 #include "ptmkit/core/coefficients.h"
 #include "ptmkit/core/image.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/basis.h"
 #include "ptmkit/fit/design.h"
 
@@ -43,6 +44,9 @@ struct ModelSelectOptions {
   std::vector<ColourModel> colours;
   DesignOptions design;
   int band_rows = 16;
+  // How the photographs are read (crop, mask, colour space), as the fit will read them, so
+  // the model is chosen on the region that is fitted.
+  StackReadOptions input;
 
   [[nodiscard]] std::string validate() const;  // empty if valid
 };

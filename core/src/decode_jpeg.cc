@@ -1,0 +1,175 @@
+// JPEG through libjpeg(-turbo)'s own API: the library's default decoding (accurate integer
+// IDCT, fancy upsampling), which is what OpenImageIO's JPEG reader uses, so the decoded bytes
+// are the ones OpenImageIO gave (checked by a test where OpenImageIO is available).
+#include <csetjmp>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include <jpeglib.h>
+
+#include "decoder.h"
+#include "ptmkit/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit::internal {
+
+namespace {
+
+struct JpegErrors {
+  jpeg_error_mgr pub;
+  std::jmp_buf jump;
+  char error[JMSG_LENGTH_MAX];
+  char warning[JMSG_LENGTH_MAX];
+  int warnings = 0;
+};
+
+[[noreturn]] void on_error(j_common_ptr cinfo) {
+  auto* e = reinterpret_cast<JpegErrors*>(cinfo->err);
+  cinfo->err->format_message(cinfo, e->error);
+  std::longjmp(e->jump, 1);
+}
+
+// Level -1 is a warning (damaged data the library repaired); others are trace messages.
+void on_message(j_common_ptr cinfo, int level) {
+  if (level >= 0) return;
+  auto* e = reinterpret_cast<JpegErrors*>(cinfo->err);
+  if (e->warnings++ == 0) cinfo->err->format_message(cinfo, e->warning);
+}
+
+class JpegDecoder final : public Decoder {
+ public:
+  JpegDecoder(fs::path path, const DecodeSettings& settings)
+      : path_(std::move(path)), settings_(settings) {
+    std::memset(&cinfo_, 0, sizeof(cinfo_));
+  }
+  ~JpegDecoder() override {
+    if (created_) jpeg_destroy_decompress(&cinfo_);
+    if (file_ != nullptr) std::fclose(file_);
+  }
+  JpegDecoder(const JpegDecoder&) = delete;
+  JpegDecoder& operator=(const JpegDecoder&) = delete;
+
+  // Returns false for colour models the direct path does not convert (CMYK, YCCK).
+  bool open(std::uintmax_t file_bytes) {
+    file_ = std::fopen(path_.c_str(), "rb");
+    if (file_ == nullptr) throw Error(where(path_) + ": cannot open image file");
+    cinfo_.err = jpeg_std_error(&errors_.pub);
+    errors_.pub.error_exit = on_error;
+    errors_.pub.emit_message = on_message;
+    if (!start()) fail("cannot read JPEG header");
+    check_dimensions(path_, cinfo_.image_width, cinfo_.image_height, cinfo_.num_components);
+    // A Huffman-coded sequential JPEG spends at least 2 bits (a DC code and an end-of-block
+    // code) on each 8x8 luminance block; a file too short for that declares more than it holds.
+    if (!cinfo_.progressive_mode && !cinfo_.arith_code) {
+      const std::uintmax_t blocks =
+          ((cinfo_.image_width + 7ULL) / 8) * ((cinfo_.image_height + 7ULL) / 8);
+      if (file_bytes < blocks / 4) {
+        throw Error(where(path_) + ": declares " + std::to_string(cinfo_.image_width) + "x" +
+                    std::to_string(cinfo_.image_height) + " pixels but its " +
+                    std::to_string(file_bytes) + " bytes cannot hold that many (at least " +
+                    std::to_string(blocks / 4) + " needed)");
+      }
+    }
+    if (cinfo_.jpeg_color_space == JCS_CMYK || cinfo_.jpeg_color_space == JCS_YCCK) return false;
+    if (cinfo_.num_components != 1 && cinfo_.num_components != 3) return false;
+    header_.width = static_cast<int>(cinfo_.image_width);
+    header_.height = static_cast<int>(cinfo_.image_height);
+    header_.channels = cinfo_.num_components == 1 ? 1 : 3;
+    header_.format = PixelFormat::kU8;
+    header_.codec = "jpeg";
+    bool exif_seen = false;
+    for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m != nullptr; m = m->next) {
+      // The first EXIF segment is the image's (a file has one; later ones are ignored).
+      if (m->marker == JPEG_APP0 + 1 && m->data_length > 6 && !exif_seen &&
+          std::memcmp(m->data, "Exif\0\0", 6) == 0) {
+        exif_seen = true;
+        const ExifFacts exif = parse_exif(m->data + 6, m->data_length - 6);
+        header_.orientation = exif.orientation;
+        if (exif.colour_space_tag == 1 && !header_.has_colour_metadata) {
+          header_.has_colour_metadata = true;
+          header_.colour_space = ColourSpace::kSRGB;
+          header_.colour_evidence = "EXIF ColorSpace sRGB";
+        }
+      } else if (m->marker == JPEG_APP0 + 2 && m->data_length > 12 &&
+                 std::memcmp(m->data, "ICC_PROFILE", 12) == 0) {
+        header_.has_colour_metadata = true;
+        header_.colour_space = ColourSpace::kSRGB;
+        header_.colour_evidence = "ICC profile (taken as sRGB-like encoded)";
+      }
+    }
+    cinfo_.out_color_space = header_.channels == 1 ? JCS_GRAYSCALE : JCS_RGB;
+    if (!begin_decompress()) fail("cannot start decoding");
+    check_warnings();
+    return true;
+  }
+
+  void read_rows(int rows, void* out) override {
+    auto* dst = static_cast<unsigned char*>(out);
+    const std::size_t stride = row_bytes();
+    for (int r = 0; r < rows; ++r) {
+      if (cinfo_.output_scanline >= cinfo_.output_height) {
+        throw Error(where(path_) + ": read past the last row");
+      }
+      if (!read_one(dst + stride * static_cast<std::size_t>(r))) fail("cannot decode");
+    }
+    check_warnings();
+  }
+
+ private:
+  bool start() {
+    if (setjmp(errors_.jump) != 0) return false;
+    jpeg_create_decompress(&cinfo_);
+    created_ = true;
+    jpeg_stdio_src(&cinfo_, file_);
+    jpeg_save_markers(&cinfo_, JPEG_APP0 + 1, 0xFFFF);
+    jpeg_save_markers(&cinfo_, JPEG_APP0 + 2, 0xFFFF);
+    jpeg_read_header(&cinfo_, TRUE);
+    return true;
+  }
+  bool begin_decompress() {
+    if (setjmp(errors_.jump) != 0) return false;
+    jpeg_start_decompress(&cinfo_);
+    return true;
+  }
+  bool read_one(unsigned char* row) {
+    if (setjmp(errors_.jump) != 0) return false;
+    JSAMPROW rows[1] = {row};
+    while (jpeg_read_scanlines(&cinfo_, rows, 1) != 1) {
+      // The stdio source never suspends; a zero return would loop forever.
+      return false;
+    }
+    return true;
+  }
+  [[noreturn]] void fail(const char* what) {
+    throw Error(where(path_) + ": " + what + ": " + excerpt(errors_.error));
+  }
+  void check_warnings() {
+    if (errors_.warnings > 0) {
+      std::string w = errors_.warning;
+      if (errors_.warnings > 1) w += " (and " + std::to_string(errors_.warnings - 1) + " more)";
+      errors_.warnings = 0;
+      damaged_data(path_, settings_, w, &warned_);
+    }
+  }
+
+  fs::path path_;
+  DecodeSettings settings_;
+  jpeg_decompress_struct cinfo_;
+  JpegErrors errors_{};
+  std::FILE* file_ = nullptr;
+  bool created_ = false;
+  bool warned_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<Decoder> open_jpeg(const fs::path& path, std::uintmax_t file_bytes,
+                                   const DecodeSettings& settings) {
+  auto d = std::make_unique<JpegDecoder>(path, settings);
+  if (!d->open(file_bytes)) return nullptr;
+  return d;
+}
+
+}  // namespace ptmkit::internal

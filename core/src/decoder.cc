@@ -1,0 +1,189 @@
+#include "decoder.h"
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+
+#include "ptmkit/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace ptmkit {
+
+std::string_view orientation_name(int orientation) {
+  switch (orientation) {
+    case 1:
+      return "normal";
+    case 2:
+      return "mirrored left-right";
+    case 3:
+      return "rotated 180";
+    case 4:
+      return "mirrored top-bottom";
+    case 5:
+      return "transposed (mirrored along the main diagonal)";
+    case 6:
+      return "rotated 90 clockwise to display";
+    case 7:
+      return "transversed (mirrored along the anti-diagonal)";
+    case 8:
+      return "rotated 90 counter-clockwise to display";
+    default:
+      return "unknown";
+  }
+}
+
+namespace internal {
+
+void check_dimensions(const fs::path& path, long long width, long long height, long long channels) {
+  if (width <= 0 || height <= 0 || channels <= 0) {
+    throw Error(where(path) + ": image has no pixels (declared " + std::to_string(width) + "x" +
+                std::to_string(height) + ", " + std::to_string(channels) + " channels)");
+  }
+  if (width > kMaxImageSidePx || height > kMaxImageSidePx) {
+    throw Error(where(path) + ": declared size " + std::to_string(width) + "x" +
+                std::to_string(height) + " exceeds the largest side accepted (" +
+                std::to_string(kMaxImageSidePx) + " px)");
+  }
+  if (width * height > kMaxImagePixels) {
+    throw Error(where(path) + ": declared size " + std::to_string(width) + "x" +
+                std::to_string(height) + " exceeds the largest image accepted (" +
+                std::to_string(kMaxImagePixels) + " pixels)");
+  }
+  if (channels > 64) {
+    throw Error(where(path) + ": declares " + std::to_string(channels) +
+                " channels (at most 64 are read)");
+  }
+}
+
+void damaged_data(const fs::path& path, const DecodeSettings& settings, const std::string& warning,
+                  bool* already_warned) {
+  if (!settings.allow_damaged) {
+    throw Error(where(path) + ": damaged image data: " + excerpt(warning) +
+                " (--allow-damaged-images accepts such files with a warning)");
+  }
+  if (!*already_warned) {
+    std::fprintf(stderr, "warning: %s: damaged image data accepted: %s\n", where(path).c_str(),
+                 excerpt(warning).c_str());
+    *already_warned = true;
+  }
+}
+
+ImageInfo info_from_header(const Header& h) {
+  ImageInfo info;
+  const bool swap = h.orientation >= 5 && h.orientation <= 8;
+  info.width = swap ? h.height : h.width;
+  info.height = swap ? h.width : h.height;
+  info.channels = h.channels;
+  info.format = h.format;
+  info.orientation = h.orientation;
+  if (h.has_colour_metadata) {
+    info.colour_space = h.colour_space;
+    info.colour_from_metadata = true;
+    info.colour_evidence = h.colour_evidence;
+  } else if (h.format == PixelFormat::kU8) {
+    info.colour_space = ColourSpace::kSRGB;
+    info.colour_evidence = "8-bit, no colour metadata: sRGB";
+  } else {
+    info.colour_space = ColourSpace::kLinear;
+    info.colour_evidence = std::string(h.format == PixelFormat::kU16 ? "16-bit" : "float") +
+                           ", no colour metadata: linear";
+  }
+  return info;
+}
+
+std::uintmax_t available_memory_bytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  std::uintmax_t value = 0;
+  std::string unit;
+  while (in >> key >> value) {
+    std::getline(in, unit);
+    if (key == "MemAvailable:") return value * 1024;
+  }
+  return 0;
+}
+
+ExifFacts parse_exif(const unsigned char* data, std::size_t size) {
+  ExifFacts facts;
+  if (size < 8) return facts;
+  bool little = false;
+  if (data[0] == 'I' && data[1] == 'I') {
+    little = true;
+  } else if (!(data[0] == 'M' && data[1] == 'M')) {
+    return facts;
+  }
+  const auto u16 = [&](std::size_t at) -> unsigned {
+    if (at + 2 > size) return 0;
+    return little ? data[at] | (data[at + 1] << 8) : (data[at] << 8) | data[at + 1];
+  };
+  const auto u32 = [&](std::size_t at) -> std::size_t {
+    if (at + 4 > size) return 0;
+    const std::uint32_t v = little ? data[at] | (data[at + 1] << 8) | (data[at + 2] << 16) |
+                                         (static_cast<std::uint32_t>(data[at + 3]) << 24)
+                                   : (static_cast<std::uint32_t>(data[at]) << 24) |
+                                         (data[at + 1] << 16) | (data[at + 2] << 8) | data[at + 3];
+    return v;
+  };
+  if (u16(2) != 42) return facts;
+  // Walks one IFD; returns the EXIF sub-IFD's offset (0 if none).
+  const auto walk = [&](std::size_t ifd, bool top) -> std::size_t {
+    if (ifd < 8 || ifd + 2 > size) return 0;
+    const unsigned entries = u16(ifd);
+    std::size_t sub = 0;
+    for (unsigned e = 0; e < entries && e < 1000; ++e) {
+      const std::size_t at = ifd + 2 + 12 * static_cast<std::size_t>(e);
+      if (at + 12 > size) break;
+      const unsigned tag = u16(at);
+      const unsigned type = u16(at + 2);
+      if (type != 3 && tag != 0x8769) continue;  // SHORT values, or the EXIF IFD pointer
+      if (top && tag == 0x0112) {
+        const unsigned v = u16(at + 8);
+        if (v >= 1 && v <= 8) facts.orientation = static_cast<int>(v);
+      } else if (top && tag == 0x8769) {
+        sub = u32(at + 8);
+      } else if (tag == 0xA001) {
+        facts.colour_space_tag = static_cast<int>(u16(at + 8));
+      }
+    }
+    return sub;
+  };
+  const std::size_t sub = walk(u32(4), true);
+  if (sub != 0 && sub != u32(4)) walk(sub, false);
+  return facts;
+}
+
+std::unique_ptr<Decoder> open_decoder(const fs::path& path, const DecodeSettings& settings) {
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (ec || !fs::exists(status)) throw Error(where(path) + ": image file not found");
+  if (!fs::is_regular_file(status)) {
+    throw Error(where(path) + ": not a regular file (images are read from regular files only)");
+  }
+  const std::uintmax_t bytes = fs::file_size(path, ec);
+  if (ec) throw Error(where(path) + ": cannot read image: " + ec.message());
+  std::array<unsigned char, 8> magic{};
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(where(path) + ": cannot open image file");
+    in.read(reinterpret_cast<char*>(magic.data()), magic.size());
+  }
+  if (bytes < 8) {
+    throw Error(where(path) + ": not an image (" + std::to_string(bytes) + " bytes)");
+  }
+  if (magic[0] == 0xFF && magic[1] == 0xD8 && magic[2] == 0xFF) {
+    if (auto d = open_jpeg(path, bytes, settings)) return d;
+    return open_oiio(path, settings);  // CMYK and YCCK
+  }
+  static constexpr std::array<unsigned char, 8> kPng{0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+  if (magic == kPng) return open_png(path, bytes, settings);
+  const bool tiff = (magic[0] == 'I' && magic[1] == 'I' && magic[2] == 42 && magic[3] == 0) ||
+                    (magic[0] == 'M' && magic[1] == 'M' && magic[2] == 0 && magic[3] == 42);
+  if (tiff) {
+    if (auto d = open_tiff(path, bytes, settings)) return d;
+  }
+  return open_oiio(path, settings);
+}
+
+}  // namespace internal
+}  // namespace ptmkit

@@ -1,0 +1,420 @@
+// The direct decoders (JPEG, PNG, TIFF) against OpenImageIO, bounded and strict decoding,
+// EXIF orientation, and the fit's real-capture input options on the command line.
+#include <cmath>
+#include <fstream>
+#include <iterator>
+
+#include <OpenImageIO/imageio.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "ptmkit/core/error.h"
+#include "ptmkit/core/image_io.h"
+#include "ptmkit/core/light_set.h"
+#include "ptmkit/core/stack_reader.h"
+#include "ptmkit/texture/ptm.h"
+#include "test_util.h"
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+namespace ptmkit {
+namespace {
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+void spit(const fs::path& p, const std::string& bytes) {
+  std::ofstream out(p, std::ios::binary);
+  out << bytes;
+}
+
+// A textured image: smooth gradients and sharp edges (exercises the IDCT and upsampling).
+Image pattern(int w, int h, int c) {
+  Image img(w, h, c, ColourSpace::kSRGB);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int k = 0; k < c; ++k)
+        img.at(x, y, k) = static_cast<float>(0.5 + 0.3 * std::sin(0.21 * x + 0.13 * y + k) +
+                                             (((x / 5 + y / 7) % 2) ? 0.15 : -0.15));
+  return img;
+}
+
+// What OpenImageIO decodes, in the file's own sample type, as doubles.
+std::vector<double> oiio_samples(const fs::path& p, PixelFormat f, int* w, int* h, int* c) {
+  auto in = OIIO::ImageInput::open(p.string());
+  if (!in) return {};
+  *w = in->spec().width;
+  *h = in->spec().height;
+  *c = in->spec().nchannels;
+  const std::size_t n = static_cast<std::size_t>(*w) * *h * *c;
+  std::vector<double> out(n);
+  if (f == PixelFormat::kU8) {
+    std::vector<std::uint8_t> v(n);
+    in->read_image(0, 0, 0, *c, OIIO::TypeDesc::UINT8, v.data());
+    std::copy(v.begin(), v.end(), out.begin());
+  } else if (f == PixelFormat::kU16) {
+    std::vector<std::uint16_t> v(n);
+    in->read_image(0, 0, 0, *c, OIIO::TypeDesc::UINT16, v.data());
+    std::copy(v.begin(), v.end(), out.begin());
+  } else {
+    std::vector<float> v(n);
+    in->read_image(0, 0, 0, *c, OIIO::TypeDesc::FLOAT, v.data());
+    std::copy(v.begin(), v.end(), out.begin());
+  }
+  return out;
+}
+
+// The direct decoders give exactly OpenImageIO's samples: JPEG (quality 95 and 75, 4:2:0 and
+// grey), PNG and TIFF at 8 and 16 bits, written by OpenImageIO's own writers. (One deliberate
+// difference, not compared here: OpenImageIO premultiplies a PNG's colour by its alpha; the
+// direct reader keeps the stored colour, which is what was photographed.)
+TEST(ImageDecode, DirectDecodersMatchOpenImageIOExactly) {
+  test::ScratchDir dir;
+  struct Case {
+    std::string name;
+    int channels;
+    PixelFormat format;
+    int quality;
+  };
+  const std::vector<Case> cases = {
+      {"q95.jpg", 3, PixelFormat::kU8, 95},  {"q75.jpg", 3, PixelFormat::kU8, 75},
+      {"grey.jpg", 1, PixelFormat::kU8, 90}, {"a8.png", 3, PixelFormat::kU8, 0},
+      {"a16.png", 3, PixelFormat::kU16, 0},  {"t8.tif", 3, PixelFormat::kU8, 0},
+      {"t16.tif", 1, PixelFormat::kU16, 0},  {"tf.tif", 3, PixelFormat::kF32, 0}};
+  for (const Case& c : cases) {
+    const Image img = pattern(61, 37, c.channels);  // odd sizes: partial MCUs
+    const fs::path p = dir / c.name;
+    auto out = OIIO::ImageOutput::create(p.string());
+    ASSERT_TRUE(out);
+    const OIIO::TypeDesc type = c.format == PixelFormat::kU8    ? OIIO::TypeDesc::UINT8
+                                : c.format == PixelFormat::kU16 ? OIIO::TypeDesc::UINT16
+                                                                : OIIO::TypeDesc::FLOAT;
+    OIIO::ImageSpec spec(61, 37, c.channels, type);
+    if (c.quality > 0) spec.attribute("Compression", "jpeg:" + std::to_string(c.quality));
+    ASSERT_TRUE(out->open(p.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data()));
+    ASSERT_TRUE(out->close());
+    int w = 0, h = 0, ch = 0;
+    const std::vector<double> ref = oiio_samples(p, c.format, &w, &h, &ch);
+    const Image mine = read_image(p);
+    ASSERT_EQ(mine.width(), w) << c.name;
+    ASSERT_EQ(mine.height(), h) << c.name;
+    ASSERT_EQ(mine.channels(), ch) << c.name;
+    std::size_t differ = 0;
+    // Back to the file's integers (exact: v / 255 in float rounds back to v).
+    const double scale = c.format == PixelFormat::kU8    ? 255.0
+                         : c.format == PixelFormat::kU16 ? 65535.0
+                                                         : 1.0;
+    for (std::size_t i = 0; i < ref.size(); ++i) {
+      const double v = double(mine.data()[i]) * scale;
+      differ += (scale == 1.0 ? v : std::round(v)) != ref[i];
+    }
+    EXPECT_EQ(differ, 0u) << c.name << ": samples differing from OpenImageIO's";
+    EXPECT_EQ(probe_image(p).format, c.format) << c.name;
+  }
+}
+
+TEST(ImageDecode, ColourSpaceDefaultsFollowTheSampleTypeWithoutMetadata) {
+  test::ScratchDir dir;
+  const Image img = pattern(8, 8, 3);
+  // 16-bit TIFF without colour metadata (as dcraw -4 -T writes): linear.
+  {
+    auto out = OIIO::ImageOutput::create((dir / "raw16.tif").string());
+    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT16);
+    ASSERT_TRUE(out->open((dir / "raw16.tif").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data()));
+    ASSERT_TRUE(out->close());
+  }
+  const ImageInfo raw = probe_image(dir / "raw16.tif");
+  EXPECT_EQ(raw.colour_space, ColourSpace::kLinear);
+  EXPECT_FALSE(raw.colour_from_metadata);
+  EXPECT_THAT(raw.colour_evidence, HasSubstr("16-bit"));
+  // ptmkit's own writers record it: sRGB chunk, gAMA 1.0.
+  write_image(dir / "s.png", img.view(), {.format = PixelFormat::kU16});
+  EXPECT_EQ(probe_image(dir / "s.png").colour_space, ColourSpace::kSRGB);
+  Image lin = img;
+  lin.set_colour_space(ColourSpace::kLinear);
+  write_image(dir / "l.png", lin.view(), {.format = PixelFormat::kU8});
+  EXPECT_EQ(probe_image(dir / "l.png").colour_space, ColourSpace::kLinear);
+}
+
+// Inserts an EXIF APP1 segment with an orientation tag right after a JPEG's SOI.
+std::string with_orientation(const std::string& jpeg, int orientation) {
+  std::string tiff = {'M', 'M', 0, 42, 0, 0, 0, 8};  // big-endian TIFF header, IFD at 8
+  tiff += std::string{0, 1};                         // one entry
+  tiff += std::string{0x01, 0x12, 0, 3, 0, 0, 0, 1, 0, static_cast<char>(orientation), 0, 0};
+  tiff += std::string(4, '\0');  // no next IFD
+  const std::string payload = std::string("Exif\0\0", 6) + tiff;
+  const std::size_t len = payload.size() + 2;
+  std::string seg = {static_cast<char>(0xFF), static_cast<char>(0xE1), static_cast<char>(len >> 8),
+                     static_cast<char>(len & 0xFF)};
+  return jpeg.substr(0, 2) + seg + payload + jpeg.substr(2);
+}
+
+TEST(ImageDecode, ExifOrientationIsAppliedAsViewersDo) {
+  test::ScratchDir dir;
+  const int w = 24, h = 16;
+  write_image(dir / "base.jpg", pattern(w, h, 3).view(), {.jpeg_quality = 90});
+  const Image base = read_image(dir / "base.jpg");
+  const std::string bytes = slurp(dir / "base.jpg");
+  // Where stored pixel (x, y) appears for each orientation (the TIFF/EXIF definitions).
+  const auto displayed = [&](int o, int x, int y, int* dx, int* dy) {
+    switch (o) {
+      case 1:
+        *dx = x;
+        *dy = y;
+        break;
+      case 2:
+        *dx = w - 1 - x;
+        *dy = y;
+        break;
+      case 3:
+        *dx = w - 1 - x;
+        *dy = h - 1 - y;
+        break;
+      case 4:
+        *dx = x;
+        *dy = h - 1 - y;
+        break;
+      case 5:
+        *dx = y;
+        *dy = x;
+        break;
+      case 6:
+        *dx = h - 1 - y;
+        *dy = x;
+        break;
+      case 7:
+        *dx = h - 1 - y;
+        *dy = w - 1 - x;
+        break;
+      case 8:
+        *dx = y;
+        *dy = w - 1 - x;
+        break;
+    }
+  };
+  for (int o = 1; o <= 8; ++o) {
+    // Built with append: GCC 12 warns falsely (-Wrestrict) on "literal" + std::string.
+    const fs::path p = dir / std::string("o").append(std::to_string(o)).append(".jpg");
+    spit(p, with_orientation(bytes, o));
+    const ImageInfo info = probe_image(p);
+    EXPECT_EQ(info.orientation, o);
+    const Image img = read_image(p);
+    ASSERT_EQ(img.width(), o >= 5 ? h : w) << o;
+    ASSERT_EQ(img.height(), o >= 5 ? w : h) << o;
+    int bad = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        int dx = 0, dy = 0;
+        displayed(o, x, y, &dx, &dy);
+        for (int c = 0; c < 3; ++c) bad += img.at(dx, dy, c) != base.at(x, y, c);
+      }
+    EXPECT_EQ(bad, 0) << "orientation " << o;
+    // The stack reader turns it the same way.
+    const std::vector<Image> stack = read_stack({p});
+    ASSERT_EQ(stack[0].width(), img.width());
+    EXPECT_EQ(std::memcmp(stack[0].data(), img.data(), img.size() * sizeof(float)), 0) << o;
+  }
+  // Mixed orientations in one capture: an error naming both files.
+  try {
+    StackReader reader({dir / "o1.jpg", dir / "o6.jpg"});
+    FAIL() << "mixed orientations accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("o6.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("o1.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("orientation"));
+  }
+}
+
+TEST(ImageDecode, TruncatedJpegIsAnErrorUnlessDamageIsAllowed) {
+  test::ScratchDir dir;
+  write_image(dir / "full.jpg", pattern(64, 64, 3).view());
+  const std::string bytes = slurp(dir / "full.jpg");
+  spit(dir / "cut.jpg", bytes.substr(0, bytes.size() * 85 / 100));
+  try {
+    (void)read_image(dir / "cut.jpg");
+    FAIL() << "truncated JPEG accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("cut.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("damaged"));
+  }
+  EXPECT_THROW((void)read_stack({dir / "cut.jpg"}), Error);
+  const Image repaired = read_image(dir / "cut.jpg", {.allow_damaged = true});
+  EXPECT_EQ(repaired.width(), 64);
+}
+
+TEST(ImageDecode, DeclaredSizeIsBoundedBeforeDecoding) {
+  test::ScratchDir dir;
+  write_image(dir / "small.jpg", pattern(16, 16, 3).view());
+  std::string bytes = slurp(dir / "small.jpg");
+  // Patch the frame header (SOF0: FF C0, length, precision, height, width) to 65500 x 65500.
+  const std::size_t sof = bytes.find("\xFF\xC0");
+  ASSERT_NE(sof, std::string::npos);
+  for (std::size_t k : {sof + 5, sof + 7}) {
+    bytes[k] = static_cast<char>(0xFF);
+    bytes[k + 1] = static_cast<char>(0xDC);
+  }
+  spit(dir / "huge.jpg", bytes);
+  try {
+    (void)probe_image(dir / "huge.jpg");
+    FAIL() << "a 65500 x 65500 claim in a small file was accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("cannot hold"));
+  }
+  // Not a regular file: refused before reading.
+  EXPECT_THROW((void)probe_image("/dev/zero"), Error);
+}
+
+TEST(ImageDecode, ErrorMessagesQuoteOnlyAShortPrintableExcerpt) {
+  const std::string long_name(50000, 'a');
+  const std::string w = where(fs::path(long_name + "\x01\x7f.jpg"));
+  EXPECT_LT(w.size(), 2 * kMaxExcerptBytes);
+  EXPECT_THAT(w, HasSubstr("bytes"));
+  EXPECT_THAT(w, HasSubstr(".jpg"));
+  EXPECT_THAT(excerpt(std::string("a\x01\x02z", 4)), HasSubstr("\\x01"));
+  EXPECT_EQ(excerpt("caf\xC3\xA9.jpg"), "caf\xC3\xA9.jpg");  // UTF-8 names stay readable
+}
+
+// A write that fails (here the file-size limit, as a full disk would) is an error and leaves
+// no file: the PNG encoder's status and the close are checked.
+TEST(ImageDecode, PngWriteFailureIsAnErrorAndLeavesNoFile) {
+  test::ScratchDir dir;
+  // Run the binary with a 4 KiB file-size limit (SIGXFSZ ignored: write() then fails).
+  const std::string cmd = "cd '" + dir.path().string() +
+                          "' && (trap '' XFSZ; ulimit -f 4; exec '" PTMKIT_BINARY
+                          "' synth --out cap --width 200 --height 150 --no-truth) >out.txt 2>&1; "
+                          "echo $? > rc.txt";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  EXPECT_NE(slurp(dir / "rc.txt"), "0\n") << slurp(dir / "out.txt");
+  EXPECT_THAT(slurp(dir / "out.txt"), HasSubstr("write failed"));
+  // Any image left is complete (written before the limit was reached), never a truncated one.
+  if (fs::exists(dir / "cap")) {
+    for (const auto& e : fs::directory_iterator(dir / "cap")) {
+      if (e.path().extension() == ".png") {
+        EXPECT_NO_THROW((void)read_image(e.path())) << e.path();
+      }
+    }
+  }
+}
+
+// ---- fit on a real capture: crop, mask, lights reuse, colour space ----
+
+struct Capture {
+  test::ScratchDir dir;
+  fs::path lp;
+  Capture() {
+    const auto r = test::run_ptmkit({"synth", "--out", (dir / "cap").string(), "--width", "40",
+                                     "--height", "30", "--no-truth"});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    lp = dir / "cap" / "lights.lp";
+  }
+};
+
+TEST(FitInputCli, CropFitsOnlyTheRectangleWithTheSameCoefficients) {
+  Capture cap;
+  const fs::path full = cap.dir / "full.ptm", crop = cap.dir / "crop.ptm";
+  auto r = test::run_ptmkit({"fit", cap.lp.string(), "-o", full.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = test::run_ptmkit({"fit", cap.lp.string(), "-o", crop.string(), "--crop", "5,7,20,11",
+                        "--report", (cap.dir / "r.json").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const CoefficientMap a = texture::read_ptm(full);
+  const CoefficientMap b = texture::read_ptm(crop);
+  ASSERT_EQ(b.width, 20);
+  ASSERT_EQ(b.height, 11);
+  // Both quantised to 8 bits with their own scale and bias: equal within a quantisation step.
+  double worst = 0.0;
+  for (int y = 0; y < 11; ++y)
+    for (int x = 0; x < 20; ++x)
+      for (int k = 0; k < 18; ++k)
+        worst = std::max(worst, std::abs(double(a.texel_coeffs(x + 5, y + 7)[k]) -
+                                         double(b.texel_coeffs(x, y)[k])));
+  EXPECT_LT(worst, 0.02);
+  EXPECT_THAT(slurp(cap.dir / "r.json"), HasSubstr("\"x\": 5"));
+  // Outside the image: an error, no output.
+  r = test::run_ptmkit(
+      {"fit", cap.lp.string(), "-o", (cap.dir / "bad.ptm").string(), "--crop", "30,20,20,20"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("does not lie inside"));
+  EXPECT_FALSE(fs::exists(cap.dir / "bad.ptm"));
+  r = test::run_ptmkit(
+      {"fit", cap.lp.string(), "-o", (cap.dir / "bad.ptm").string(), "--crop", "1,2,3"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_FALSE(fs::exists(cap.dir / "bad.ptm"));
+}
+
+TEST(FitInputCli, MaskSelectsItsBoundingBoxAndBlackensTheRest) {
+  Capture cap;
+  Image mask(40, 30, 1, ColourSpace::kLinear, 0.0f);
+  for (int y = 10; y < 20; ++y)
+    for (int x = 8; x < 30; ++x) mask.at(x, y, 0) = (x + y) % 3 == 0 ? 0.0f : 1.0f;
+  write_image(cap.dir / "mask.png", mask.view());
+  const fs::path out = cap.dir / "m.ptm";
+  auto r = test::run_ptmkit(
+      {"fit", cap.lp.string(), "-o", out.string(), "--mask", (cap.dir / "mask.png").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const CoefficientMap m = texture::read_ptm(out);
+  EXPECT_EQ(m.width, 22);
+  EXPECT_EQ(m.height, 10);
+  // A mask of another size: an error naming it, no output.
+  write_image(cap.dir / "small.png", Image(20, 30, 1, ColourSpace::kLinear, 1.0f).view());
+  r = test::run_ptmkit({"fit", cap.lp.string(), "-o", (cap.dir / "bad.ptm").string(), "--mask",
+                        (cap.dir / "small.png").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("small.png"));
+  EXPECT_FALSE(fs::exists(cap.dir / "bad.ptm"));
+}
+
+TEST(FitInputCli, LightsFromAnotherCaptureApplyToTheImagesGiven) {
+  Capture cap;
+  const LightSet lights = read_lp(cap.lp);
+  // Copy the images elsewhere under other names: another capture of the same rig.
+  fs::create_directories(cap.dir / "obj");
+  std::vector<std::string> args = {"fit", "--lights", cap.lp.string(), "-o",
+                                   (cap.dir / "reuse.ptm").string()};
+  for (std::size_t i = 0; i < lights.size(); ++i) {
+    const fs::path p = cap.dir / "obj" / ("photo" + std::to_string(i) + ".png");
+    fs::copy_file(lights.lights[i].image, p);
+    args.push_back(p.string());
+  }
+  auto r = test::run_ptmkit(args);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = test::run_ptmkit({"fit", cap.lp.string(), "-o", (cap.dir / "own.ptm").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(slurp(cap.dir / "reuse.ptm"), slurp(cap.dir / "own.ptm"));
+  args.pop_back();  // one image short
+  args[4] = (cap.dir / "short.ptm").string();
+  r = test::run_ptmkit(args);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("lights but"));
+  EXPECT_FALSE(fs::exists(cap.dir / "short.ptm"));
+}
+
+TEST(FitInputCli, InputColourSpaceIsAppliedAndReported) {
+  Capture cap;
+  for (const std::string cs : {"srgb", "linear"}) {
+    const fs::path rep = cap.dir / (cs + ".json");
+    auto r = test::run_ptmkit({"fit", cap.lp.string(), "-o", (cap.dir / (cs + ".ptm")).string(),
+                               "--input-colour-space", cs, "--report", rep.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_THAT(slurp(rep), HasSubstr("--input-colour-space " + cs));
+  }
+  auto r = test::run_ptmkit({"fit", cap.lp.string(), "-o", (cap.dir / "x.ptm").string(),
+                             "--input-colour-space", "gamma"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_FALSE(fs::exists(cap.dir / "x.ptm"));
+}
+
+TEST(FitInputCli, LightFileThatIsADeviceFailsFast) {
+  test::ScratchDir dir;
+  const auto r = test::run_ptmkit({"fit", "/dev/zero", "-o", (dir / "z.ptm").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("not a regular file"));
+}
+
+}  // namespace
+}  // namespace ptmkit
