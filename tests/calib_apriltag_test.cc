@@ -46,8 +46,8 @@ std::vector<Expected> read_expected(const fs::path& path) {
 }
 
 // The expected files were made at full resolution without edge refinement; the corner
-// tolerance is the requirement's, 1.5 px (docs/TARGETS.md; our luma comes from decoded RGB rather than the JPEG's Y
-// plane, which moves corners by a fraction of a pixel).
+// tolerance is the requirement's, 1.5 px (docs/TARGETS.md; our luma comes from decoded RGB rather
+// than the JPEG's Y plane, which moves corners by a fraction of a pixel).
 constexpr double kMaxCornerErrorPx = 1.5;
 
 TEST(CalibAprilTag, RealPhotosMatchTheGoldenDetections) {

@@ -1,5 +1,5 @@
-// How light-calibration error carries into a fit (tests/support/calibration_study.h): a relief fitted
-// with lights calibrated from rendered sphere photographs relights like one fitted with the
+// How light-calibration error carries into a fit (tests/support/calibration_study.h): a relief
+// fitted with lights calibrated from rendered sphere photographs relights like one fitted with the
 // true lights; deliberate errors move the relit values in proportion.
 #include <cstdio>
 

@@ -71,7 +71,8 @@ TEST(CompareLibrary, FoldsAndTruthGiveSaneNumbers) {
   const SolverResult& ls = r.results[0];
   const SolverResult& robust = r.results[1];
   // The robust default rejects shadows and highlights: closer to the diffuse truth and
-  // better normals than least squares (the robust targets of docs/TARGETS.md; measured margins are 2 dB and 3x).
+  // better normals than least squares (the robust targets of docs/TARGETS.md; measured margins are
+  // 2 dB and 3x).
   EXPECT_GT(robust.truth_psnr_db, ls.truth_psnr_db + 1.0);
   EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg);
   EXPECT_EQ(ls.shadow_fraction + ls.highlight_fraction, 0.0);

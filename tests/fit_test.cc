@@ -106,7 +106,8 @@ TEST(FitImages, RecoversThePolynomialWorldWithinFloatInputPrecision) {
     }
     EXPECT_LT(report.residuals.rms_grey, 255.0 * 8 * eps);
     EXPECT_EQ(report.lights, 49);
-    EXPECT_NEAR(report.design.condition_number, 5.3, 0.2);  // the dome49 layout's cond(A) (docs/TARGETS.md)
+    EXPECT_NEAR(report.design.condition_number, 5.3,
+                0.2);  // the dome49 layout's cond(A) (docs/TARGETS.md)
   }
 }
 

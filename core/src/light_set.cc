@@ -64,14 +64,6 @@ LightSet read_lp(const fs::path& path) {
   checked_input_size(path, kMaxTextFileBytes, "light file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(where(path) + ": cannot open light file");
-  // A device (/dev/zero) or a FIFO would be read without end: light files are regular files
-  // of a few kilobytes (a light per line).
-  if (!fs::is_regular_file(path, ec)) throw Error(where(path) + ": not a regular file");
-  if (fs::file_size(path, ec) > kMaxLightFileBytes) {
-    throw Error(where(path) + ": " + std::to_string(fs::file_size(path, ec)) +
-                " bytes is too large for a light file (at most " +
-                std::to_string(kMaxLightFileBytes) + ")");
-  }
   LightSet set;
   set.source = path;
   const fs::path base = path.has_parent_path() ? path.parent_path() : fs::path(".");

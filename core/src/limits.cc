@@ -113,25 +113,4 @@ void check_coefficients(const fs::path& path, const float* values, std::size_t c
   }
 }
 
-std::string excerpt(std::string_view text) {
-  std::string out;
-  std::size_t shown = 0;
-  for (const char ch : text) {
-    if (shown == kMaxExcerptChars) {
-      out += "...";
-      break;
-    }
-    const auto c = static_cast<unsigned char>(ch);
-    if (c >= 0x20 && c < 0x7f) {
-      out += ch;
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02X", c);
-      out += buf;
-    }
-    ++shown;
-  }
-  return out;
-}
-
 }  // namespace ptmkit

@@ -233,9 +233,9 @@ StackReader::StackReader(std::vector<fs::path> files, const StackReadOptions& op
                   "; every image of a capture must have the same size");
     }
     if (sample_channels(h.channels) != impl_->channels) {
-      throw Error(
-          where(f) + ": image has " + std::to_string(sample_channels(h.channels)) +
-          " colour channel(s) but " + first_name + " has " + std::to_string(impl_->channels));
+      throw Error(where(f) + ": image has " + std::to_string(sample_channels(h.channels)) +
+                  " colour channel(s) but " + first_name + " has " +
+                  std::to_string(impl_->channels));
     }
   }
   StackInputSummary& sum = impl_->summary;

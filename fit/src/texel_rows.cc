@@ -88,7 +88,7 @@ void NearRowFitter::fit_row(const StackBand& band, int r, float* c_out, float* c
   const double ridge = setup_.near.ridge_lambda * static_cast<double>(n);
   for (int x = 0; x < width_; ++x) {
     setup_.near.model->texel(x + setup_.near.origin_x, y + setup_.near.origin_y, g.dirs.data(),
-                               g.correction.data());
+                             g.correction.data());
     for (int i = 0; i < n; ++i) {
       const auto b = ptm_basis(g.dirs(i, 0), g.dirs(i, 1));
       for (int t = 0; t < kPtmTerms; ++t) g.basis(i, t) = b[static_cast<std::size_t>(t)];

@@ -46,9 +46,6 @@ struct LightSet {
 // that does not parse, NaN or infinite components, a zero vector, a direction with z <= 0,
 // a duplicate image, a count that does not match, no entries.
 [[nodiscard]] LightSet read_lp(const std::filesystem::path& path);
-// Largest .lp read (bytes): 16 MiB is 200 000 lights' lines; anything larger, and anything
-// that is not a regular file, is refused before it is read.
-inline constexpr std::uintmax_t kMaxLightFileBytes = 16u << 20;
 
 // The lights of one capture applied to the photographs of another taken on the same rig in
 // the same order (a light file calibrated from a chrome-sphere capture, used for an object's

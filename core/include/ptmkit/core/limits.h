@@ -8,6 +8,8 @@
 #include <string>
 #include <string_view>
 
+#include "ptmkit/core/error.h"  // excerpt()
+
 namespace ptmkit {
 
 // Text inputs read whole (.lp light files, JSON: boards, domes, cameras, planes, lights).
@@ -22,8 +24,6 @@ inline constexpr long long kMaxBoardTags = 100000;
 inline constexpr long long kMaxTagId = (1LL << 31) - 1;
 // Characters of a file name read from an input (Linux's PATH_MAX).
 inline constexpr std::size_t kMaxPathChars = 4096;
-// Characters of an input echoed in an error message.
-inline constexpr std::size_t kMaxExcerptChars = 64;
 
 // Largest coefficient magnitude a texture writer accepts (.ptm, .rti): the largest half float.
 // Intensities are normalised to full scale 1; a coefficient beyond this comes from a
@@ -53,9 +53,5 @@ void check_allocation(const std::filesystem::path& path, std::uint64_t bytes,
 
 // `a * b` for sizes read from files; throws ptmkit::Error naming `path` on overflow.
 std::uint64_t checked_multiply(const std::filesystem::path& path, std::uint64_t a, std::uint64_t b);
-
-// At most kMaxExcerptChars of `text`, with bytes outside printable ASCII shown as \xNN and
-// "..." where it was cut: what an error message may quote of an input.
-std::string excerpt(std::string_view text);
 
 }  // namespace ptmkit
