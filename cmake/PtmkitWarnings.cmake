@@ -15,6 +15,11 @@ if(PTMKIT_FUZZ)
     -fno-sanitize-recover=undefined -g)
   target_link_options(ptmkit_build_flags INTERFACE -fsanitize=address,undefined)
 endif()
+if(PTMKIT_SANITIZE OR PTMKIT_FUZZ)
+  # One name for "built with AddressSanitizer" under gcc (__SANITIZE_ADDRESS__) and clang
+  # (__has_feature), for code and tests that must behave differently there.
+  target_compile_definitions(ptmkit_build_flags INTERFACE PTMKIT_ASAN=1)
+endif()
 if(PTMKIT_SANITIZE)
   target_compile_options(ptmkit_build_flags INTERFACE
     -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)

@@ -16,11 +16,19 @@ if [ -z "$build" ]; then
 fi
 bash "$root/scripts/install-deps.sh"
 btype=Release
-[ "$sanitize" = ON ] && btype=RelWithDebInfo
 bench=ON
-[ "$sanitize" = ON ] && bench=OFF
+extra=()
+if [ "$sanitize" = ON ]; then
+  # The sanitizer build is clang's and also builds the libFuzzer targets (every target
+  # instrumented for coverage): scripts/fuzz.sh then runs them from this folder without a
+  # build of its own.
+  btype=RelWithDebInfo
+  bench=OFF
+  extra=(-DPTMKIT_FUZZ=ON)
+  export CC="${CC:-clang}" CXX="${CXX:-clang++}"
+fi
 # Build output goes to stderr: stdout's last line is the build folder, for the callers.
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE="$btype" -DPTMKIT_SANITIZE="$sanitize" \
-  -DPTMKIT_BUILD_BENCH="$bench" >&2
+  -DPTMKIT_BUILD_BENCH="$bench" "${extra[@]}" >&2
 cmake --build "$build" -j "$(nproc)" >&2
 echo "$build"

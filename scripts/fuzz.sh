@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (fuzz/, clang, ASan + UBSan) and runs each for a bounded time.
 # Usage: scripts/fuzz.sh [SECONDS_PER_TARGET] [BUILD_DIR]     (default 20 s, build/fuzz)
+# BUILD_DIR may be the sanitizer build of scripts/test.sh --sanitize (build/asan), which has
+# the targets already; otherwise one is configured with clang and only the targets are built.
 # Corpus: fuzz/seeds/TARGET (committed) plus BUILD_DIR/corpus/TARGET (what runs found; kept
 # between runs, not committed). A finding (crash, sanitizer report, leak, uncaught exception
 # other than ptmkit::Error, timeout, allocation past the limits) is saved under
@@ -10,17 +12,20 @@ set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 seconds="${1:-20}"
 build="${2:-$root/build/fuzz}"
+targets=(lp ptm rti json image)
 bash "$root/scripts/install-deps.sh"
-CC=clang CXX=clang++ cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DPTMKIT_FUZZ=ON >&2
-cmake --build "$build" -j "$(nproc)" >&2
+if ! grep -q '^PTMKIT_FUZZ:BOOL=ON' "$build/CMakeCache.txt" 2>/dev/null; then
+  CC=clang CXX=clang++ cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DPTMKIT_FUZZ=ON -DPTMKIT_BUILD_TESTS=OFF >&2
+fi
+cmake --build "$build" -j "$(nproc)" --target "${targets[@]/#/fuzz_}" >&2
 asan="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}"
 export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$root/scripts/lsan.supp:print_suppressions=0}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 mkdir -p "$build/findings"
 failed=0
 total=0
-for target in lp ptm rti json image; do
+for target in "${targets[@]}"; do
   corpus="$build/corpus/$target"
   mkdir -p "$corpus"
   log="$build/fuzz_$target.log"

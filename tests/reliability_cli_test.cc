@@ -102,7 +102,7 @@ TEST(ReliabilityFullDisk, RelightOutDirReportsNoSuccessAndKeepsEarlierResults) {
 }
 
 TEST(ReliabilityFullDisk, SynthLeavesNoEmptyImages) {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(PTMKIT_ASAN)
   // Under AddressSanitizer a synth run whose writes fail at the file-size limit does not end
   // (the test's 300 s time-out); the plain build runs this test. Known open defect: libjpeg
   // ends the process on a write error.

@@ -27,7 +27,7 @@ constexpr long long kAddressSpace = 2LL << 30;
 class ReliabilityLimits : public ::testing::Test {
  protected:
   void SetUp() override {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(PTMKIT_ASAN)
     GTEST_SKIP() << "an address-space limit cannot be combined with AddressSanitizer";
 #endif
   }

@@ -23,7 +23,7 @@ void RowFitter::fit(const StackBand& band, std::vector<float>* coeffs, std::vect
   const std::size_t row_texels = static_cast<std::size_t>(width_);
   const std::size_t n_coeffs = static_cast<std::size_t>(band.rows) * row_texels * per_texel;
   const std::size_t n_colour = static_cast<std::size_t>(band.rows) * row_texels * ncol;
-#ifdef __SANITIZE_ADDRESS__
+#ifdef PTMKIT_ASAN
   // Every path writes every value, so release builds only size the buffers (filling them
   // was a memset of a band's whole output per band). Sanitizer builds fill them with NaN:
   // a value some path leaves unwritten then fails the tests (the writers refuse NaN).
