@@ -4,8 +4,10 @@
 #include <memory>
 
 #include "commands.h"
+#include "mpi_collective.h"
 #include "progress.h"
 #include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/collective.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
@@ -78,9 +80,11 @@ struct CoefficientWriter {
       w.file_bytes = r.file_bytes;
       w.max_coeff_error = r.max_coeff_error;
       w.rms_coeff_error = r.rms_coeff_error;
-      w.relit_mean_abs_grey = r.relit_mean_abs_grey;
-      w.relit_max_abs_grey = r.relit_max_abs_grey;
-      w.relit_psnr_db = r.relit_psnr_db;
+      if (r.relit_samples > 0) {  // not measured by a fit shared among processes
+        w.relit_mean_abs_grey = r.relit_mean_abs_grey;
+        w.relit_max_abs_grey = r.relit_max_abs_grey;
+        w.relit_psnr_db = r.relit_psnr_db;
+      }
     } else {
       const texture::RtiWriteReport& r = rti->report();
       w.file_bytes = r.file_bytes;
@@ -91,14 +95,70 @@ struct CoefficientWriter {
   }
 };
 
-CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& path) {
+// One process's share of a fit run by several (an MPI job): its rows of the region.
+struct Share {
+  Collective* peers = nullptr;
+  RowRange rows;
+  int full_height = 0;
+};
+
+CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& path,
+                              const Share& share) {
   CoefficientWriter w;
   if (format == fit::CoefficientFormat::kPtm) {
-    w.ptm = std::make_unique<texture::PtmStreamWriter>(path);
+    texture::PtmWriteOptions o;
+    o.collective = share.peers;
+    o.row_offset = share.rows.begin;
+    o.full_height = share.full_height;
+    w.ptm = std::make_unique<texture::PtmStreamWriter>(path, o);
   } else {
-    w.rti = std::make_unique<texture::RtiWriter>(path);
+    w.rti = std::make_unique<texture::RtiWriter>(
+        path, texture::RtiShare{share.peers, share.rows.begin, share.full_height});
   }
   return w;
+}
+
+// Plans the fit; under MPI with --model auto, rank 0 chooses the model (on the whole capture)
+// and the others fit what it chose.
+fit::FitPlan plan_everywhere(const LightSet& lights, fit::FitRequest request, Collective* peers) {
+  if (peers == nullptr || request.model != fit::ModelRequest::kAuto) {
+    return fit::plan_fit(lights, request);
+  }
+  fit::FitPlan plan;
+  std::string chosen;
+  if (peers->rank() == 0) {
+    plan = fit::plan_fit(lights, request);
+    chosen = std::string(fit::to_string(plan.options.basis)) + " " +
+             std::string(to_string(plan.options.model));
+  }
+  peers->agree(true, "model selection");
+  peers->broadcast(&chosen);
+  if (peers->rank() == 0) return plan;
+  const std::size_t space = chosen.find(' ');
+  request.model = fit::parse_model_request(chosen.substr(0, space));
+  request.options.model = parse_colour_model(chosen.substr(space + 1));
+  request.colour_given = true;
+  return fit::plan_fit(lights, request);
+}
+
+// Under MPI: this process's rows of the region the fit reads (after crop and mask).
+Share share_rows(Collective* peers, const LightSet& lights, fit::FitOptions* options) {
+  Share share;
+  if (peers == nullptr) return share;
+  int height = 0;
+  {
+    const StackReader probe(lights.images(), options->input);
+    height = probe.height();
+  }
+  if (height < peers->size()) {
+    throw Error("fit: " + std::to_string(peers->size()) + " processes for " +
+                std::to_string(height) + " rows; start at most one process per row");
+  }
+  share.peers = peers;
+  share.full_height = height;
+  share.rows = rows_of_rank(height, peers->rank(), peers->size());
+  options->input.rows = share.rows;
+  return share;
 }
 
 void run_fit(const FitArgs& args) {
@@ -109,7 +169,9 @@ void run_fit(const FitArgs& args) {
   request.options.precision =
       args.precision == "double" ? fit::Precision::kDouble : fit::Precision::kFloat;
   request.options.solver = fit::parse_solver(args.solver);
-  request.options.progress = make_progress("fit");
+  Collective* const peers = mpi_session() != nullptr ? mpi_session()->collective() : nullptr;
+  const bool lead = peers == nullptr || peers->rank() == 0;
+  if (lead) request.options.progress = make_progress("fit");
   if (!args.crop.empty()) request.options.input.crop = parse_pixel_rect(args.crop);
   request.options.input.colour_space = parse_input_colour_space(args.input_colour_space);
   request.model = fit::parse_model_request(args.model);
@@ -122,6 +184,12 @@ void run_fit(const FitArgs& args) {
   maps.want_labels = !args.labels.empty();
   request.wants_maps =
       maps.want_residual_map || maps.want_outlier_counts || maps.want_normals || maps.want_labels;
+  if (peers != nullptr && request.wants_maps) {
+    throw Error(
+        "--residual-map, --outlier-map, --normals, --albedo and --labels are written by a fit "
+        "in one process; under mpirun only the coefficient file and --report are (fit the "
+        "maps without mpirun)");
+  }
   check_map_path(args.residual_map, "--residual-map", false);
   check_map_path(args.outlier_map, "--outlier-map", false);
   check_map_path(args.normals, "--normals", true);
@@ -136,8 +204,9 @@ void run_fit(const FitArgs& args) {
   if (!args.plane.empty()) request.options.near.plane = read_plane_json(args.plane);
 
   // One library call each: plan (model, format, what goes together), fit.
-  const fit::FitPlan plan = fit::plan_fit(lights, request);
-  if (plan.selection) {
+  fit::FitPlan plan = plan_everywhere(lights, request, peers);
+  const Share share = share_rows(peers, lights, &plan.options);
+  if (plan.selection && lead) {
     std::printf("model selection: %d texels (every %d px), %d folds over %d lights, %.2f s\n%s",
                 plan.selection->texels, plan.selection->stride, plan.selection->folds,
                 plan.selection->lights, plan.selection->seconds, plan.selection->table().c_str());
@@ -145,10 +214,11 @@ void run_fit(const FitArgs& args) {
   // Every output reaches its path together with the others once all are written (the
   // command's OutputTransaction, apps/main.cc): a failure anywhere leaves none of them.
   const fs::path out_path(args.output);
-  CoefficientWriter writer = make_writer(plan.format, out_path);
+  CoefficientWriter writer = make_writer(plan.format, out_path, share);
   fit::FitRunReport run;
   run.fit =
       fit::fit_capture(lights, plan.options, writer.sink(), request.wants_maps ? &maps : nullptr);
+  if (peers != nullptr) fit::combine_shares(&run.fit, *peers);
   run.selection = plan.selection;
   run.input = args.lights_file.empty() ? args.inputs[0] : args.lights_file;
   run.output = out_path;
@@ -170,6 +240,7 @@ void run_fit(const FitArgs& args) {
     fit::write_label_images(args.labels, maps, lights, run.fit.width, run.fit.height);
   }
   if (!args.normals.empty()) write_normal_map(args.normals, maps.normals.view());
+  if (!lead) return;  // rank 0 reports for the job
   if (!args.report.empty()) write_file_atomic(args.report, run.to_json());
   std::printf("%s", run.brief().c_str());
 }

@@ -1,13 +1,16 @@
 // ptmkit: polynomial texture maps from photographs under known lights.
 #include <cstdio>
 #include <exception>
+#include <memory>
 #include <new>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "commands.h"
+#include "mpi_collective.h"
 #include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/collective.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/version.h"
 
@@ -18,7 +21,51 @@ constexpr const char* kExitCodes =
     "docs/RELIABILITY.md); 2 bad command line.";
 }
 
+namespace {
+
+// Prints a command's error: under MPI only the process whose failure stopped the job (the
+// lowest rank that failed), named; the others stop quietly.
+void report_error(const ptmkit::app::MpiSession* mpi, const char* what, bool peer) {
+  ptmkit::Collective* peers = mpi != nullptr ? mpi->collective() : nullptr;
+  if (peers == nullptr) {
+    std::fprintf(stderr, "ptmkit: error: %s\n", what);
+    return;
+  }
+  if (!peer) peers->fail();
+  if (peer) return;
+  const int first = peers->first_failed_rank();
+  if (first >= 0 && first != peers->rank()) return;
+  std::fprintf(stderr, "ptmkit: error (process %d of %d): %s\n", peers->rank(), peers->size(),
+               what);
+}
+
+// The subcommand named on the command line (the first word that is not an option).
+std::string subcommand_of(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (argv[i][0] != '-') return argv[i];
+  }
+  return "";
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  std::unique_ptr<ptmkit::app::MpiSession> mpi;
+  try {
+    mpi = std::make_unique<ptmkit::app::MpiSession>(&argc, &argv);
+    if (mpi->size() > 1 && subcommand_of(argc, argv) != "fit") {
+      if (mpi->rank() == 0) {
+        std::fprintf(stderr,
+                     "ptmkit: error: only `ptmkit fit` runs as several processes (mpirun, srun); "
+                     "start `ptmkit %s` as one process\n",
+                     subcommand_of(argc, argv).c_str());
+      }
+      return 2;
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ptmkit: error: %s\n", e.what());
+    return 1;
+  }
   CLI::App app{
       "ptmkit: light-dependent textures (polynomial texture maps) from photographs "
       "under known lights.",
@@ -51,10 +98,14 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     app.exit(e);
     return 2;
+  } catch (const ptmkit::PeerFailure& e) {
+    report_error(mpi.get(), e.what(), true);
+    return 1;
   } catch (const ptmkit::Error& e) {
-    std::fprintf(stderr, "ptmkit: error: %s\n", e.what());
+    report_error(mpi.get(), e.what(), false);
     return 1;
   } catch (const std::bad_alloc&) {
+    if (mpi->collective() != nullptr) mpi->collective()->fail();
     std::string name = "ptmkit";
     for (const CLI::App* sub : app.get_subcommands()) name += " " + sub->get_name();
     std::fprintf(stderr,
@@ -63,7 +114,7 @@ int main(int argc, char** argv) {
                  name.c_str());
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "ptmkit: error: %s\n", e.what());
+    report_error(mpi.get(), e.what(), false);
     return 1;
   }
   return 0;

@@ -33,14 +33,14 @@ using namespace ptmkit;
 
 namespace {
 
-struct Error {
+struct RelightError {
   double rms_grey = 0.0;
   double psnr_db = 0.0;
   double p99_grey = 0.0;
 };
 
-Error relight_error(const CoefficientMap& map, const std::vector<Image>& truth,
-                    const std::vector<Eigen::Vector3d>& dirs) {
+RelightError relight_error(const CoefficientMap& map, const std::vector<Image>& truth,
+                           const std::vector<Eigen::Vector3d>& dirs) {
   double sum = 0.0;
   std::vector<double> abs_err;
   for (std::size_t k = 0; k < dirs.size(); ++k) {
@@ -56,7 +56,7 @@ Error relight_error(const CoefficientMap& map, const std::vector<Image>& truth,
       }
     }
   }
-  Error e;
+  RelightError e;
   const double mse = sum / static_cast<double>(abs_err.size());
   e.rms_grey = 255.0 * std::sqrt(mse);
   e.psnr_db = ptmkit::psnr_db(mse);
@@ -181,7 +181,7 @@ int main(int argc, char** argv) {
     fo.residual_stats = false;
     CoefficientMapSink sink(&floor_map);
     (void)fit::fit_images(distant_images, dirs, fo, sink);
-    const Error e = relight_error(floor_map, truth, held);
+    const RelightError e = relight_error(floor_map, truth, held);
     std::printf("%-14s %10.3f %10.3f %10.2f   (same scene under distant lights, distant model)\n",
                 "floor", e.rms_grey, e.p99_grey, e.psnr_db);
   }
@@ -208,7 +208,7 @@ int main(int argc, char** argv) {
       best_fit = std::min(best_fit, rep.fit_seconds);
       best_total = std::min(best_total, rep.total_seconds);
     }
-    const Error e = relight_error(map, truth, held);
+    const RelightError e = relight_error(map, truth, held);
     // The light model's own share: relit difference from the floor fit (same lights).
     std::vector<Image> floor_relit;
     for (const auto& d : held) {
@@ -217,7 +217,7 @@ int main(int argc, char** argv) {
         for (int x = 0; x < size; ++x) floor_map.evaluate(x, y, d.x(), d.y(), &img.at(x, y, 0));
       floor_relit.push_back(std::move(img));
     }
-    const Error f = relight_error(map, floor_relit, held);
+    const RelightError f = relight_error(map, floor_relit, held);
     std::printf("%-14s %10.3f %10.3f %10.2f %12.4f %12.4f %14.3f\n", v.name, e.rms_grey, e.p99_grey,
                 e.psnr_db, best_fit, best_total, f.rms_grey);
     if (v.near && !v.falloff) near_map = map;

@@ -43,3 +43,16 @@ endfunction()
 find_package(JPEG REQUIRED)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
+
+# MPI (Open MPI from Debian's libopenmpi-dev): `ptmkit fit` under mpirun/srun shares one
+# capture among processes (docs/SCALE.md). Found at configure time unless PTMKIT_MPI=OFF; a
+# build without it runs everything else and refuses a launch with several processes.
+option(PTMKIT_MPI "Build `ptmkit fit`'s MPI support when MPI is found" ON)
+set(PTMKIT_WITH_MPI OFF)
+if(PTMKIT_MPI)
+  find_package(MPI COMPONENTS C QUIET)
+  if(MPI_C_FOUND)
+    set(PTMKIT_WITH_MPI ON)
+  endif()
+endif()
+message(STATUS "ptmkit: MPI support ${PTMKIT_WITH_MPI}")

@@ -7,7 +7,7 @@ packages=(
   libopenimageio-dev openimageio-tools libtbb-dev libjpeg-dev libpng-dev libtiff-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   time clang libclang-rt-14-dev
-  libjpeg-dev libcpp-httplib-dev
+  libcpp-httplib-dev libopenmpi-dev openmpi-bin
 )
 # The browser tests' chromium and node (scripts/install-browser-deps.sh; never fatal).
 bash "$(dirname "$0")/install-browser-deps.sh" || true

@@ -63,15 +63,19 @@ std::optional<fs::path> shared_data(const std::string& sub) {
 }
 
 RunResult run_ptmkit(const std::vector<std::string>& args) {
+  std::vector<std::string> argv{PTMKIT_BINARY};
+  argv.insert(argv.end(), args.begin(), args.end());
+  return run_command(argv);
+}
+
+RunResult run_command(const std::vector<std::string>& args) {
   RunResult result;
   const fs::path tmp =
       fs::temp_directory_path() / ("ptmkit-run-" + std::to_string(::getpid()) + "-" +
                                    std::to_string(std::hash<std::string>{}(current_test_name())));
   const fs::path out_path = tmp.string() + ".out";
   const fs::path err_path = tmp.string() + ".err";
-  std::vector<std::string> argv_store;
-  argv_store.emplace_back(PTMKIT_BINARY);
-  argv_store.insert(argv_store.end(), args.begin(), args.end());
+  std::vector<std::string> argv_store = args;
   std::vector<char*> argv;
   for (auto& a : argv_store) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -83,7 +87,7 @@ RunResult run_ptmkit(const std::vector<std::string>& args) {
     if (out_fd < 0 || err_fd < 0) ::_exit(127);
     ::dup2(out_fd, 1);
     ::dup2(err_fd, 2);
-    ::execv(argv[0], argv.data());
+    ::execvp(argv[0], argv.data());
     ::_exit(127);
   }
   int status = 0;

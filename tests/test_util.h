@@ -41,6 +41,8 @@ struct RunResult {
 };
 // Runs the built ptmkit binary with `args` (no shell), capturing its output.
 [[nodiscard]] RunResult run_ptmkit(const std::vector<std::string>& args);
+// Runs `argv` (argv[0] a path, or a name looked up on PATH; no shell), capturing its output.
+[[nodiscard]] RunResult run_command(const std::vector<std::string>& argv);
 
 // A seed derived from the running test's full name, so each test's randomness is fixed and a
 // failure can be replayed.

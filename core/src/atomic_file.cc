@@ -7,6 +7,8 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <set>
@@ -51,11 +53,30 @@ fs::path folder_of(const fs::path& p) {
   return p.has_parent_path() ? p.parent_path() : fs::path(".");
 }
 
+// Eight hex digits naming this machine: a process id means something only on the machine
+// that issued it, and several machines may write into one shared folder (an MPI job).
+const std::string& host_tag() {
+  static const std::string tag = [] {
+    char host[256] = {};
+    if (::gethostname(host, sizeof host - 1) != 0) host[0] = '\0';
+    std::uint32_t h = 2166136261u;  // FNV-1a
+    for (const char* c = host; *c != '\0'; ++c) {
+      h = (h ^ static_cast<unsigned char>(*c)) * 16777619u;
+    }
+    char buf[9];
+    std::snprintf(buf, sizeof buf, "%08x", h);
+    return std::string(buf);
+  }();
+  return tag;
+}
+
 fs::path next_temp(const fs::path& dir, const std::string& ext) {
   std::string name(kTempPrefix);
   name.append(std::to_string(::getpid()))
       .append("-")
       .append(std::to_string(g_counter.fetch_add(1)))
+      .append("-")
+      .append(host_tag())
       .append(ext);
   return dir / name;
 }
@@ -115,6 +136,14 @@ int remove_stale_temporaries(const fs::path& dir) {
     std::size_t stop = start;
     while (stop < name.size() && name[stop] >= '0' && name[stop] <= '9') ++stop;
     if (stop == start || stop - start > 9 || stop >= name.size() || name[stop] != '-') continue;
+    // PID-N-HOST: only this machine can tell whether the process is gone.
+    std::size_t n_end = stop + 1;
+    while (n_end < name.size() && name[n_end] >= '0' && name[n_end] <= '9') ++n_end;
+    if (n_end + 9 <= name.size() && name[n_end] == '-' &&
+        name.find_first_not_of("0123456789abcdef", n_end + 1) >= n_end + 9 &&
+        name.compare(n_end + 1, 8, host_tag()) != 0) {
+      continue;
+    }
     if (!process_gone(std::stol(name.substr(start, stop - start)))) continue;
     std::error_code ec2;
     if (!it->is_symlink(ec2) && it->is_regular_file(ec2) && fs::remove(it->path(), ec2)) {

@@ -39,6 +39,16 @@ RawFile RawFile::create(const std::filesystem::path& path, const std::filesystem
   return RawFile(fd);
 }
 
+RawFile RawFile::open_for_writing(const std::filesystem::path& path,
+                                  const std::filesystem::path& what) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) {
+    throw Error(where(what) + ": cannot open " + excerpt(path.filename().string()) +
+                " for writing: " + std::strerror(errno));
+  }
+  return RawFile(fd);
+}
+
 RawFile RawFile::create_unlinked(const std::filesystem::path& path) {
   const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
   if (fd < 0) {

@@ -290,6 +290,24 @@ StackReader::StackReader(std::vector<fs::path> files, const StackReadOptions& op
     }
     sum.mask = options.mask.string();
   }
+  if (options.rows) {
+    const RowRange& rr = *options.rows;
+    if (rr.begin < 0 || rr.begin >= rr.end || rr.end > region.height) {
+      throw Error("rows " + std::to_string(rr.begin) + ".." + std::to_string(rr.end) +
+                  " lie outside the " + std::to_string(region.height) + " rows read");
+    }
+    if (!impl_->mask.empty()) {
+      const auto w = static_cast<std::size_t>(region.width);
+      std::vector<std::uint8_t> kept(
+          impl_->mask.begin() + static_cast<std::ptrdiff_t>(rr.begin * w),
+          impl_->mask.begin() + static_cast<std::ptrdiff_t>(rr.end * w));
+      impl_->mask.swap(kept);
+      sum.masked_out_texels = static_cast<std::uint64_t>(
+          std::count(impl_->mask.begin(), impl_->mask.end(), std::uint8_t{0}));
+    }
+    region.y += rr.begin;
+    region.height = rr.rows();
+  }
   sum.region = region;
   switch (options.colour_space) {
     case InputColourSpace::kAuto:

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include <nlohmann/json.hpp>
 
@@ -45,6 +46,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
   j["model"] = std::string(to_string(r.model));
   j["colour_space"] = std::string(to_string(r.colour_space));
   auto num = [](double v) -> nlohmann::json {
+    if (std::isnan(v)) return nullptr;
     if (std::isfinite(v)) return v;
     return "inf";
   };
@@ -55,10 +57,12 @@ nlohmann::json fit_report_json(const FitReport& r) {
                  {"max_elevation_deg", r.design.max_elevation_deg},
                  {"single_ring", r.design.single_ring},
                  {"regularised", r.design.regularised}};
-  j["residuals_grey"] = {
-      {"rms", r.residuals.rms_grey},         {"mean_abs", r.residuals.mean_abs_grey},
-      {"p99_abs", r.residuals.p99_abs_grey}, {"max_abs", r.residuals.max_abs_grey},
-      {"samples", r.residuals.samples},      {"row_step", r.residuals.row_step}};
+  j["residuals_grey"] = {{"rms", r.residuals.rms_grey},
+                         {"mean_abs", r.residuals.mean_abs_grey},
+                         {"p99_abs", num(r.residuals.p99_abs_grey)},
+                         {"max_abs", r.residuals.max_abs_grey},
+                         {"samples", r.residuals.samples},
+                         {"row_step", r.residuals.row_step}};
   j["solver"] = std::string(to_string(r.solver));
   j["outliers"] = {{"samples", r.outliers.samples},
                    {"shadow", r.outliers.shadows},
@@ -78,6 +82,7 @@ nlohmann::json fit_report_json(const FitReport& r) {
     j["light_model"] = lm;
   }
   if (r.input.full_width > 0) j["images"] = nlohmann::json::parse(r.input.to_json());
+  j["processes"] = r.processes;
   j["threads"] = r.threads;
   j["timings_s"] = {{"decode", r.decode_seconds},
                     {"fit", r.fit_seconds},
@@ -90,15 +95,55 @@ nlohmann::json fit_report_json(const FitReport& r) {
 
 std::string FitReport::to_json() const { return internal::fit_report_json(*this).dump(2); }
 
+void combine_shares(FitReport* report, Collective& peers) {
+  FitReport& r = *report;
+  ResidualStats& res = r.residuals;
+  const auto n = static_cast<double>(res.samples);
+  // Sums: rows, samples, squared and absolute residuals, label counts, masked texels.
+  double sums[5] = {static_cast<double>(r.height), n, res.rms_grey * res.rms_grey * n,
+                    res.mean_abs_grey * n, static_cast<double>(r.input.region.height)};
+  peers.sum(sums, 5);
+  std::uint64_t counts[7] = {r.outliers.samples,       r.outliers.shadows,
+                             r.outliers.highlights,    r.outliers.fallback_texels,
+                             r.outliers.ceres_texels,  r.light_model.singular_texels,
+                             r.input.masked_out_texels};
+  peers.sum(counts, 7);
+  double maxima[4] = {res.max_abs_grey, r.decode_seconds, r.fit_seconds, r.total_seconds};
+  peers.max(maxima, 4);
+  double first_row = r.input.region.y;
+  peers.min(&first_row, 1);
+  r.height = static_cast<int>(sums[0]);
+  res.samples = static_cast<std::uint64_t>(sums[1]);
+  res.rms_grey = sums[1] > 0 ? std::sqrt(sums[2] / sums[1]) : 0.0;
+  res.mean_abs_grey = sums[1] > 0 ? sums[3] / sums[1] : 0.0;
+  res.p99_abs_grey = std::numeric_limits<double>::quiet_NaN();
+  res.max_abs_grey = maxima[0];
+  r.outliers = {counts[0], counts[1], counts[2], counts[3], counts[4]};
+  r.light_model.singular_texels = counts[5];
+  r.input.masked_out_texels = counts[6];
+  r.input.region.y = static_cast<int>(first_row);
+  r.input.region.height = static_cast<int>(sums[4]);
+  r.decode_seconds = maxima[1];
+  r.fit_seconds = maxima[2];
+  r.total_seconds = maxima[3];
+  r.processes = peers.size();
+}
+
 std::string FitReport::brief() const {
-  char line[256];
+  char p99[32] = "";
+  if (!std::isnan(residuals.p99_abs_grey)) {
+    std::snprintf(p99, sizeof p99, " (p99 %.2f)", residuals.p99_abs_grey);
+  }
+  char line[320];
   std::snprintf(line, sizeof line,
-                "%d lights, %dx%d, %s %s, cond(A) %.3g, residual rms %.2f grey (p99 %.2f), "
+                "%d lights, %dx%d, %s %s, cond(A) %.3g, residual rms %.2f grey%s, "
                 "%.3f s (%.2f Mtexel/s, %d threads)",
                 lights, width, height, std::string(to_string(basis)).c_str(),
                 std::string(to_string(model)).c_str(), design.condition_number, residuals.rms_grey,
-                residuals.p99_abs_grey, total_seconds, texels_per_second() / 1e6, threads);
-  return line;
+                p99, total_seconds, texels_per_second() / 1e6, threads);
+  std::string out = line;
+  if (processes > 1) out += ", " + std::to_string(processes) + " processes";
+  return out;
 }
 
 }  // namespace ptmkit::fit

@@ -6,6 +6,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -41,7 +42,11 @@ constexpr int kSliceRows = 16;
 
 struct PtmStreamWriter::Impl {
   int width = 0;
-  int height = 0;
+  int height = 0;  // rows this process holds
+  // The file's rows: this process's are full_height - row_offset - height .. (stored rows,
+  // bottom-up) of full_height; one process: 0 and height.
+  int row_offset = 0;
+  int full_height = 0;
   ColourModel model = ColourModel::kRGB;
   PtmFormat format = PtmFormat::kRGB;
   // Halfs per texel: 18 (kRGB), 8 (kYCC: a0..a4 shared, then a5 of R, G, B), 6 (kLRGB).
@@ -185,6 +190,20 @@ void PtmStreamWriter::begin(const CoefficientLayout& layout) {
   s = Impl{};
   s.width = width;
   s.height = height;
+  s.row_offset = 0;
+  s.full_height = height;
+  if (options_.collective != nullptr) {
+    if (options_.row_offset < 0 || options_.full_height < height ||
+        options_.row_offset > options_.full_height - height) {
+      throw std::logic_error("PtmStreamWriter: rows outside the distributed file's height");
+    }
+    s.row_offset = options_.row_offset;
+    s.full_height = options_.full_height;
+    if (s.full_height > kMaxPtmSide) {
+      throw Error(where(path_) + ": cannot write a " + std::to_string(width) + " x " +
+                  std::to_string(s.full_height) + " PTM");
+    }
+  }
   s.model = model;
   s.format = internal::format_for(model);
   s.halfs_per_texel = model == ColourModel::kRGB ? 18 : model == ColourModel::kYCC ? 8 : 6;
@@ -207,7 +226,9 @@ void PtmStreamWriter::begin(const CoefficientLayout& layout) {
   }
   s.halfs.allocate(static_cast<std::size_t>(s.memory_rows) * s.row_halfs());
   if (model == ColourModel::kLRGB) s.rgb.allocate(texels * 3);
-  s.sample_stride = internal::relit_sample_stride(texels, options_);
+  // Distributed: no relit sample (its figures would need every process's texels).
+  s.sample_stride =
+      options_.collective != nullptr ? 0 : internal::relit_sample_stride(texels, options_);
   if (s.sample_stride > 0) {
     const std::size_t samples = (texels + s.sample_stride - 1) / s.sample_stride;
     s.sample_halfs.assign(samples * s.halfs_per_texel, 0);
@@ -464,27 +485,41 @@ void PtmStreamWriter::end() {
   if (!s.begun || s.next_row != s.height) {
     throw std::logic_error("PtmStreamWriter: end() before every row was written");
   }
-  if (!s.finite) {
-    throw Error(where(path_) +
-                ": the fit produced NaN or infinite coefficients (or beyond half-float range); "
-                "nothing was written");
+  Collective* const peers = options_.collective;
+  const auto non_finite = [&] {
+    return Error(where(path_) +
+                 ": the fit produced NaN or infinite coefficients (or beyond half-float range); "
+                 "nothing was written");
+  };
+  if (peers != nullptr && !peers->all(s.finite)) {
+    if (!s.finite) throw non_finite();
+    throw PeerFailure(where(path_) + ": another process of the job failed (its message says why)");
   }
+  if (!s.finite) throw non_finite();
   std::array<double, kPtmTerms> lo{}, hi{};
   for (int i = 0; i < kPtmTerms; ++i) {
     lo[i] = 255.0 * static_cast<double>(s.lo[i]);
     hi[i] = 255.0 * static_cast<double>(s.hi[i]);
   }
+  if (peers != nullptr) {
+    // The range over every process's rows: the scales and biases one process would choose.
+    peers->min(lo.data(), lo.size());
+    peers->max(hi.data(), hi.size());
+  }
   PtmFile meta;  // header fields only; the data is written slice by slice
   meta.version = PtmVersion::k1_2;
   meta.format = s.format;
   meta.width = s.width;
-  meta.height = s.height;
+  meta.height = s.full_height;
   meta.quantisation = choose_quantisation(lo, hi, options_.integer_scales);
   const PtmQuantisation& q = meta.quantisation;
   const std::string header = meta.canonical_header();
   const int np = internal::planes(s.format);
   const std::size_t texels = s.texels();
   const std::size_t w = static_cast<std::size_t>(s.width);
+  // The whole file's texels (plane stride), and where this process's stored rows start.
+  const std::size_t file_texels = static_cast<std::size_t>(s.full_height) * w;
+  const std::size_t stored_row0 = static_cast<std::size_t>(s.full_height - s.row_offset - s.height);
 
   report_ = PtmWriteReport{};
   const HalfTables tables = half_tables(q);
@@ -514,10 +549,29 @@ void PtmStreamWriter::end() {
       }
     }
   } wait_relit{relit};
-  AtomicOutput out(path_);
+  // Rank 0 (or the one process) creates the temporary; the others write into it.
+  std::optional<AtomicOutput> out;
+  RawFile file;
+  std::filesystem::path temp;
+  if (peers == nullptr || peers->rank() == 0) {
+    try {
+      out.emplace(path_);
+      temp = out->temp_path();
+      file = RawFile::create(temp, path_);
+      file.write_at(header.data(), header.size(), 0, path_);
+    } catch (const Error&) {
+      // The others stop at the agreement below; this process's own error is the message.
+      if (peers != nullptr) (void)peers->all(false);
+      throw;
+    }
+  }
+  if (peers != nullptr) {
+    peers->agree(true, where(path_));
+    std::string name = temp.string();
+    peers->broadcast(&name);
+    if (peers->rank() != 0) file = RawFile::open_for_writing(name, path_);
+  }
   {
-    RawFile file = RawFile::create(out.temp_path(), path_);
-    file.write_at(header.data(), header.size(), 0, path_);
     const std::size_t data0 = header.size();
     // Slices of kSliceRows stored rows, through a pipeline: slices read their half floats
     // (from the spill file, if any) and are encoded in parallel, and are written in order by
@@ -547,15 +601,15 @@ void PtmStreamWriter::end() {
     const auto write_slice = [&](Slice* slice) {
       const Slice& buf = *slice;
       const std::size_t plane_bytes = static_cast<std::size_t>(buf.nrows) * w * kPtmTerms;
+      const std::size_t j = stored_row0 + static_cast<std::size_t>(buf.j0);
       for (int p = 0; p < np; ++p) {
         const std::size_t at =
-            data0 + (static_cast<std::size_t>(p) * texels + static_cast<std::size_t>(buf.j0) * w) *
-                        kPtmTerms;
+            data0 + (static_cast<std::size_t>(p) * file_texels + j * w) * kPtmTerms;
         file.write_at(buf.bytes.data() + p * plane_bytes, plane_bytes, at, path_);
       }
       if (s.format == PtmFormat::kLRGB) {
-        file.write_at(buf.rgb.data(), buf.rgb.size(),
-                      data0 + texels * kPtmTerms + static_cast<std::size_t>(buf.j0) * w * 3, path_);
+        file.write_at(buf.rgb.data(), buf.rgb.size(), data0 + file_texels * kPtmTerms + j * w * 3,
+                      path_);
       }
     };
     tbb::parallel_pipeline(
@@ -568,14 +622,27 @@ void PtmStreamWriter::end() {
   report_.format = s.format;
   report_.quantisation = q;
   coefficient_errors(counts, tables.error_of, texels * np * kPtmTerms, &report_);
+  if (peers != nullptr) {
+    // Every process's rows written (and closed) before rank 0 renames the file.
+    peers->agree(true, where(path_));
+    double mx = report_.max_coeff_error;
+    double sq[2] = {report_.rms_coeff_error * report_.rms_coeff_error *
+                        static_cast<double>(texels * np * kPtmTerms),
+                    static_cast<double>(texels * np * kPtmTerms)};
+    peers->max(&mx, 1);
+    peers->sum(sq, 2);
+    report_.max_coeff_error = mx;
+    report_.rms_coeff_error = sq[1] > 0.0 ? std::sqrt(sq[0] / sq[1]) : 0.0;
+    peers->finish();
+  }
   relit.wait();
   report_.relit_mean_abs_grey = relit_report.relit_mean_abs_grey;
   report_.relit_max_abs_grey = relit_report.relit_max_abs_grey;
   report_.relit_psnr_db = relit_report.relit_psnr_db;
   report_.relit_samples = relit_report.relit_samples;
-  out.commit();
+  if (out) out->commit();
   report_.path = path_;
-  report_.file_bytes = header.size() + texels * internal::bytes_per_texel(s.format);
+  report_.file_bytes = header.size() + file_texels * internal::bytes_per_texel(s.format);
   s = Impl{};
 }
 

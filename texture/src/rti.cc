@@ -7,12 +7,15 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/limits.h"
+#include "ptmkit/core/raw_file.h"
 #include "ptmkit/texture/formats.h"
 
 namespace fs = std::filesystem;
@@ -61,7 +64,12 @@ Basis hsh_basis_of_terms(int terms) {
   }
 }
 
-RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
+namespace {
+
+// write_rti for one process or a share of several (RtiWriter's RtiShare).
+RtiWriteReport write_rti_rows(const fs::path& path, const CoefficientMap& map,
+                              const RtiShare& share) {
+  Collective* const peers = share.collective;
   const int t = map.terms();
   if (map.basis == Basis::kPtm || hsh_order(t) == 0) {
     throw Error(where(path) + ": an .rti holds an HSH basis (4, 9 or 16 terms), the map is " +
@@ -74,35 +82,48 @@ RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
   if (map.width <= 0 || map.height <= 0 || map.coeffs.size() != map.texels() * 3 * t) {
     throw Error(where(path) + ": the map's size does not match its coefficients");
   }
-  check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width, 3 * t);
-  // Per term: the range over every texel and channel.
-  std::vector<float> lo(t, std::numeric_limits<float>::infinity());
-  std::vector<float> hi(t, -std::numeric_limits<float>::infinity());
+  const int full_height = peers != nullptr ? share.full_height : map.height;
+  const int row_offset = peers != nullptr ? share.row_offset : 0;
+  // Every process checks its rows; they agree before anything is written.
+  try {
+    check_coefficients(path, map.coeffs.data(), map.coeffs.size(), map.width, 3 * t, row_offset);
+  } catch (const Error&) {
+    if (peers != nullptr) (void)peers->all(false);
+    throw;
+  }
+  if (peers != nullptr) peers->agree(true, where(path));
+  // Per term: the range over every texel and channel (of every process).
+  std::vector<double> lo(t, std::numeric_limits<double>::infinity());
+  std::vector<double> hi(t, -std::numeric_limits<double>::infinity());
   for (std::size_t i = 0; i < map.coeffs.size(); ++i) {
-    const float v = map.coeffs[i];
-    if (!std::isfinite(v)) {
-      throw Error(where(path) + ": the map has a non-finite coefficient");
-    }
-    const auto k = static_cast<int>(i % static_cast<std::size_t>(t));
+    const auto v = static_cast<double>(map.coeffs[i]);
+    const auto k = static_cast<std::size_t>(i % static_cast<std::size_t>(t));
     lo[k] = std::min(lo[k], v);
     hi[k] = std::max(hi[k], v);
   }
+  if (peers != nullptr) {
+    peers->min(lo.data(), lo.size());
+    peers->max(hi.data(), hi.size());
+  }
   std::vector<float> scale(t), bias(t);
   for (int k = 0; k < t; ++k) {
-    bias[k] = lo[k];
+    // The ranges are of floats: back to float exactly.
+    const auto l = static_cast<float>(lo[k]);
+    const auto h = static_cast<float>(hi[k]);
+    bias[k] = l;
     // A constant term still needs a non-zero scale (readers divide by it).
-    scale[k] = hi[k] > lo[k] ? hi[k] - lo[k] : 1e-6f;
+    scale[k] = h > l ? h - l : 1e-6f;
   }
   std::ostringstream header;
   // CRLF, as CHI's HSH fitter writes: a widely used Java viewer counts header bytes assuming
   // two-byte line ends.
-  header << "#HSH1.2\r\n3\r\n" << map.width << ' ' << map.height << " 3\r\n" << t << " 2 1\r\n";
-  std::string blob = header.str();
-  const std::size_t head = blob.size();
-  blob.resize(head + 2 * sizeof(float) * t + map.coeffs.size());
-  std::memcpy(blob.data() + head, scale.data(), sizeof(float) * t);
-  std::memcpy(blob.data() + head + sizeof(float) * t, bias.data(), sizeof(float) * t);
-  auto* bytes = reinterpret_cast<unsigned char*>(blob.data() + head + 2 * sizeof(float) * t);
+  header << "#HSH1.2\r\n3\r\n" << map.width << ' ' << full_height << " 3\r\n" << t << " 2 1\r\n";
+  std::string head = header.str();
+  const std::size_t data0 = head.size() + 2 * sizeof(float) * t;
+  head.resize(data0);
+  std::memcpy(head.data() + data0 - 2 * sizeof(float) * t, scale.data(), sizeof(float) * t);
+  std::memcpy(head.data() + data0 - sizeof(float) * t, bias.data(), sizeof(float) * t);
+  std::vector<unsigned char> bytes(map.coeffs.size());
   RtiWriteReport report;
   report.path = path;
   double sum_sq = 0.0;
@@ -116,10 +137,54 @@ RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
     report.max_coeff_error = std::max(report.max_coeff_error, e);
     sum_sq += e * e;
   }
-  report.rms_coeff_error = std::sqrt(sum_sq / static_cast<double>(map.coeffs.size()));
-  write_file_atomic(path, blob);
-  report.file_bytes = blob.size();
+  double count = static_cast<double>(map.coeffs.size());
+  const std::size_t row_bytes = static_cast<std::size_t>(map.width) * 3 * t;
+  report.file_bytes = data0 + row_bytes * static_cast<std::size_t>(full_height);
+  if (peers == nullptr) {
+    std::string blob = std::move(head);
+    blob.append(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    write_file_atomic(path, blob);
+  } else {
+    // Rank 0 creates the temporary and writes the header; every process its rows.
+    std::optional<AtomicOutput> out;
+    RawFile file;
+    std::string temp;
+    if (peers->rank() == 0) {
+      try {
+        out.emplace(path);
+        temp = out->temp_path().string();
+        file = RawFile::create(temp, path);
+        file.write_at(head.data(), head.size(), 0, path);
+      } catch (const Error&) {
+        (void)peers->all(false);
+        throw;
+      }
+    }
+    peers->agree(true, where(path));
+    peers->broadcast(&temp);
+    if (peers->rank() != 0) file = RawFile::open_for_writing(temp, path);
+    file.write_at(bytes.data(), bytes.size(),
+                  data0 + row_bytes * static_cast<std::size_t>(row_offset), path);
+    file.close(path);
+    peers->agree(true, where(path));
+    double mx = report.max_coeff_error;
+    double sums[2] = {sum_sq, count};
+    peers->max(&mx, 1);
+    peers->sum(sums, 2);
+    report.max_coeff_error = mx;
+    sum_sq = sums[0];
+    count = sums[1];
+    peers->finish();
+    if (out) out->commit();
+  }
+  report.rms_coeff_error = std::sqrt(sum_sq / count);
   return report;
+}
+
+}  // namespace
+
+RtiWriteReport write_rti(const fs::path& path, const CoefficientMap& map) {
+  return write_rti_rows(path, map, {});
 }
 
 namespace {
@@ -264,6 +329,11 @@ RtiSummary summarise_rti(const std::filesystem::path& path) {
 }
 
 void RtiWriter::begin(const CoefficientLayout& layout) {
+  if (share_.collective != nullptr &&
+      (share_.row_offset < 0 || share_.full_height < layout.height ||
+       share_.row_offset > share_.full_height - layout.height)) {
+    throw std::logic_error("RtiWriter: rows outside the distributed file's height");
+  }
   if (layout.basis == Basis::kPtm || layout.model != ColourModel::kRGB) {
     throw Error(where(path_) + ": an .rti holds an HSH basis in three channels, not " +
                 std::string(to_string(layout.basis)) + " " + std::string(to_string(layout.model)));
@@ -276,7 +346,7 @@ void RtiWriter::write_rows(int y0, int rows, const float* coeffs, const float* c
 }
 
 void RtiWriter::end() {
-  report_ = write_rti(path_, map_);
+  report_ = write_rti_rows(path_, map_, share_);
   map_ = CoefficientMap();  // the memory back
 }
 

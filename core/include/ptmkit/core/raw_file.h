@@ -27,6 +27,10 @@ class RawFile {
   // stands for, e.g. the target of a temporary).
   [[nodiscard]] static RawFile create(const std::filesystem::path& path,
                                       const std::filesystem::path& what);
+  // An existing file, for writing in place (another process created it; a distributed
+  // writer's share of one output). Throws ptmkit::Error naming `what`.
+  [[nodiscard]] static RawFile open_for_writing(const std::filesystem::path& path,
+                                                const std::filesystem::path& what);
   // A new file for reading and writing that no other process may have opened, removed from
   // its folder at once: nothing is left behind whatever happens to the process. Throws
   // ptmkit::Error naming the path.

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "ptmkit/core/collective.h"
 #include "ptmkit/core/image_io.h"
 
 namespace ptmkit {
@@ -52,6 +53,11 @@ struct StackReadOptions {
   // full scale are the object. Only the mask's bounding box (within the crop, if any) is read,
   // and the samples of texels outside the mask are 0 in every image (a fit writes them black).
   std::filesystem::path mask;
+  // Only rows [begin, end) of that region (after the crop and the mask's box) are read: one
+  // process's share of a fit divided among several (core/collective.h). Rows above are
+  // still decoded and dropped where the format cannot seek (JPEG, PNG, strip TIFF). The mask's
+  // box is found on the whole region first, so every share has the region's width.
+  std::optional<RowRange> rows;
 };
 
 // What the reader took the stack to be (fit reports carry it).

@@ -149,6 +149,9 @@ struct FitReport {
   NearLightReport light_model;
   // How the images were read (fit_capture): region, orientation, colour space and why.
   StackInputSummary input;
+  // Processes that shared the fit (combine_shares); 1 for one process. With more, the
+  // residual percentile (p99) is not known (NaN): the others are exact over every process.
+  int processes = 1;
   int threads = 0;
   // Wall-clock seconds. Decoding and fitting overlap, so decode + fit can exceed total.
   double decode_seconds = 0.0;  // summed over bands
@@ -171,6 +174,12 @@ struct FitReport {
 // ls/ridge is an error. The sink receives options.basis's layout (CoefficientSink::begin).
 FitReport fit_capture(const LightSet& lights, const FitOptions& options, CoefficientSink& sink,
                       FitOutputs* outputs = nullptr);
+
+// A fit shared by several processes, each of its rows (FitOptions::input.rows): turns each
+// process's report into the whole fit's, on every process (a collective call). Sizes,
+// regions, sample and label counts are summed, residual RMS, mean and max combined exactly,
+// times are the slowest process's.
+void combine_shares(FitReport* report, Collective& peers);
 
 // The same on images already in memory (all the same size and channel count), one per
 // direction. An alpha channel is not a sample (RGBA is fitted as RGB, grey + alpha as grey),

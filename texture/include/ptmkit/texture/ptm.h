@@ -65,6 +65,7 @@
 #include <Eigen/Core>
 
 #include "ptmkit/core/coefficients.h"
+#include "ptmkit/core/collective.h"
 
 namespace ptmkit::texture {
 
@@ -196,6 +197,16 @@ struct PtmWriteOptions {
   // (byte - bias) * scale to an integer. Off: the finest scales (the bytes fit has always
   // written).
   bool integer_scales = false;
+  // PtmStreamWriter only, a fit shared by several processes (core/collective.h): this process
+  // writes image rows [row_offset, row_offset + begin()'s layout height) of a file
+  // `full_height` rows tall, and the others the rest. The processes agree on the
+  // quantisation (the coefficients' range over all of them) before any byte is written; rank
+  // 0 creates the temporary file, every process writes its rows into it, and rank 0 renames
+  // it after every process succeeded. The bytes are those one process would write. The relit
+  // error is not measured (relit_samples 0). nullptr: one process.
+  Collective* collective = nullptr;
+  int row_offset = 0;
+  int full_height = 0;
 };
 
 // What quantisation cost.

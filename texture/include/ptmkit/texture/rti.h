@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 
 #include "ptmkit/core/coefficients.h"
+#include "ptmkit/core/collective.h"
 #include "ptmkit/core/hsh.h"
 #include "ptmkit/core/image.h"
 
@@ -57,9 +58,21 @@ RtiWriteReport write_rti(const std::filesystem::path& path, const CoefficientMap
 // A sink (core/coefficients.h) that collects a fit in memory and writes it as an .rti at
 // end(): the quantisation needs every texel's range, so the map is held whole (3 x terms
 // floats per texel). begin() refuses layouts write_rti cannot store.
+// A fit shared by several processes (core/collective.h): this process holds image rows
+// [row_offset, row_offset + begin()'s layout height) of a file `full_height` rows tall. The
+// processes agree on every term's range before any byte is written; rank 0 creates the
+// temporary file, each process writes its rows into it, rank 0 renames it after all
+// succeeded: the bytes one process would write.
+struct RtiShare {
+  Collective* collective = nullptr;
+  int row_offset = 0;
+  int full_height = 0;
+};
+
 class RtiWriter final : public CoefficientSink {
  public:
-  explicit RtiWriter(std::filesystem::path path) : path_(std::move(path)) {}
+  explicit RtiWriter(std::filesystem::path path, RtiShare share = {})
+      : path_(std::move(path)), share_(share) {}
   void begin(const CoefficientLayout& layout) override;
   void write_rows(int y0, int rows, const float* coeffs, const float* colour) override;
   void end() override;
@@ -68,6 +81,7 @@ class RtiWriter final : public CoefficientSink {
 
  private:
   std::filesystem::path path_;
+  RtiShare share_;
   CoefficientMap map_;
   CoefficientMapSink sink_{&map_};
   RtiWriteReport report_;

@@ -1,0 +1,206 @@
+// `ptmkit fit` shared among the processes of an MPI job (mpirun, oversubscribed on this
+// machine): the output is byte-identical to one process's at 1-4 processes for every model,
+// colour model, solver and input option; what cannot be shared is refused; a process that
+// fails stops the job with one message and no output. Skipped in builds without MPI.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "ptmkit/core/image.h"
+#include "ptmkit/core/image_io.h"
+#include "reliability_util.h"
+#include "test_util.h"
+
+namespace ptmkit {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+#ifdef PTMKIT_MPIEXEC
+constexpr bool kHaveMpi = true;
+constexpr const char* kMpiexec = PTMKIT_MPIEXEC;
+#else
+constexpr bool kHaveMpi = false;
+constexpr const char* kMpiexec = "";
+#endif
+
+// `ptmkit ARGS` as `processes` processes of one MPI job.
+test::RunResult run_mpi(int processes, const std::vector<std::string>& args) {
+  // Open MPI refuses root unless told twice (CI runs as root); more processes than cores is
+  // what this 2-core machine can offer.
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  std::vector<std::string> argv{kMpiexec, "-np", std::to_string(processes), "--oversubscribe",
+                                PTMKIT_BINARY};
+  argv.insert(argv.end(), args.begin(), args.end());
+  return test::run_command(argv);
+}
+
+// Lines of `text` that contain `needle`.
+int count_lines(const std::string& text, const std::string& needle) {
+  int n = 0;
+  std::size_t at = 0;
+  while ((at = text.find(needle, at)) != std::string::npos) {
+    ++n;
+    at += needle.size();
+  }
+  return n;
+}
+
+// Temporaries or anything else left in `dir` besides `keep`.
+std::vector<std::string> leftovers(const fs::path& dir, const std::vector<std::string>& keep) {
+  std::vector<std::string> out;
+  for (const std::string& name : test::list_files(dir)) {
+    if (std::find(keep.begin(), keep.end(), name) == keep.end()) out.push_back(name);
+  }
+  return out;
+}
+
+// One capture set for the whole suite: a distant-light capture, a near-light one, a mask.
+class MpiFit : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    if (!kHaveMpi) return;
+    dir_ = new test::ScratchDir();
+    const auto synth = [](const std::vector<std::string>& args) {
+      const test::RunResult r = test::run_ptmkit(args);
+      ASSERT_EQ(r.exit_code, 0) << r.err;
+    };
+    synth({"synth", "--out", (*dir_ / "cap").string(), "--size", "72", "--seed", "3"});
+    synth({"synth", "--out", (*dir_ / "near").string(), "--size", "64", "--seed", "4",
+           "--dome-radius", "300", "--mm-per-px", "1"});
+    Image mask(72, 72, 1, ColourSpace::kLinear, 0.0f);
+    for (int y = 0; y < 72; ++y) {
+      for (int x = 0; x < 72; ++x) {
+        const int dx = x - 40, dy = y - 30;
+        mask.at(x, y, 0) = dx * dx + dy * dy < 26 * 26 ? 1.0f : 0.0f;
+      }
+    }
+    write_image(*dir_ / "mask.png", mask.view());
+  }
+  static void TearDownTestSuite() {
+    delete dir_;
+    dir_ = nullptr;
+  }
+  void SetUp() override {
+    if (!kHaveMpi) GTEST_SKIP() << "built without MPI (libopenmpi-dev not found)";
+  }
+  static fs::path at(const std::string& name) { return *dir_ / name; }
+  static test::ScratchDir* dir_;
+};
+test::ScratchDir* MpiFit::dir_ = nullptr;
+
+struct Case {
+  const char* name;
+  std::vector<std::string> args;  // after `fit LIGHTS -o OUT`
+  const char* capture;            // "cap" or "near"
+  const char* ext;                // ".ptm" or ".rti"
+};
+
+void PrintTo(const Case& c, std::ostream* os) { *os << c.name; }
+
+std::string case_name(const ::testing::TestParamInfo<Case>& info) { return info.param.name; }
+
+class MpiIdentical : public MpiFit, public ::testing::WithParamInterface<Case> {};
+
+TEST_P(MpiIdentical, SameBytesAsOneProcessAtOneToFourProcesses) {
+  const Case& c = GetParam();
+  const std::string lp = (at(c.capture) / "lights.lp").string();
+  std::vector<std::string> extra = c.args;
+  for (std::string& a : extra) {
+    if (a == "MASK") a = at("mask.png").string();
+    if (a == "LIGHTS_JSON") a = (at(c.capture) / "lights.json").string();
+    if (a == "PLANE") a = (at(c.capture) / "plane.json").string();
+  }
+  test::ScratchDir out;
+  const fs::path single = out / (std::string("single") + c.ext);
+  std::vector<std::string> args{"fit", lp, "-o", single.string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  const test::RunResult one = test::run_ptmkit(args);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const std::string expected = test::slurp(single);
+  ASSERT_GT(expected.size(), 1000u);
+  for (int n = 1; n <= 4; ++n) {
+    const fs::path shared = out / ("shared" + std::to_string(n) + c.ext);
+    const fs::path report = out / ("report" + std::to_string(n) + ".json");
+    args = {"fit", lp, "-o", shared.string(), "--report", report.string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const test::RunResult r = run_mpi(n, args);
+    ASSERT_EQ(r.exit_code, 0) << n << " processes: " << r.err << r.out;
+    EXPECT_TRUE(test::slurp(shared) == expected) << n << " processes: the bytes differ";
+    // One report, for the whole job.
+    const nlohmann::json j = nlohmann::json::parse(test::slurp(report));
+    EXPECT_EQ(j["processes"].get<int>(), n);
+    EXPECT_EQ(count_lines(r.out, "wrote "), 1) << r.out;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Models, MpiIdentical,
+    ::testing::Values(Case{"ptm_rgb", {}, "cap", ".ptm"},
+                      Case{"ptm_lrgb", {"--format", "lrgb"}, "cap", ".ptm"},
+                      Case{"ptm_ycc", {"--format", "ycc"}, "cap", ".ptm"},
+                      Case{"ptm_double", {"--precision", "double"}, "cap", ".ptm"},
+                      Case{"hsh3_rti", {"--model", "hsh3"}, "cap", ".rti"},
+                      Case{"auto", {"--model", "auto", "--format", "rgb"}, "cap", ".rti"},
+                      Case{
+                          "robust_lrgb", {"--solver", "robust", "--format", "lrgb"}, "cap", ".ptm"},
+                      Case{"crop", {"--crop", "5,9,51,47"}, "cap", ".ptm"},
+                      Case{"mask", {"--mask", "MASK", "--format", "lrgb"}, "cap", ".ptm"},
+                      Case{"near_falloff",
+                           {"--lights-json", "LIGHTS_JSON", "--plane", "PLANE", "--falloff"},
+                           "near",
+                           ".ptm"}),
+    case_name);
+
+TEST_F(MpiFit, AFailingProcessStopsTheJobWithOneMessageAndNoOutput) {
+  // A copy of the capture whose last image lost its second half: the processes that read
+  // the lower rows fail, the first (top rows) does not.
+  test::ScratchDir work;
+  const fs::path cap = work / "cap";
+  fs::copy(at("cap"), cap, fs::copy_options::recursive);
+  const fs::path last = cap / "image_049.png";
+  const std::string bytes = test::slurp(last);
+  test::spit(last, bytes.substr(0, bytes.size() / 2));
+  const fs::path out = work / "out.ptm";
+  test::spit(out, "what was there before");
+  const test::RunResult r = run_mpi(3, {"fit", (cap / "lights.lp").string(), "-o", out.string()});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_EQ(count_lines(r.err, "ptmkit: error"), 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("image_049.png"));
+  EXPECT_EQ(test::slurp(out), "what was there before");
+  const std::vector<std::string> left = leftovers(work.path(), {"out.ptm"});
+  EXPECT_TRUE(left.empty()) << left.size() << " files left, e.g. " << (left.empty() ? "" : left[0]);
+}
+
+TEST_F(MpiFit, WhatCannotBeSharedIsRefused) {
+  test::ScratchDir work;
+  const std::string lp = (at("cap") / "lights.lp").string();
+  // Per-texel maps are written by one process.
+  test::RunResult r = run_mpi(
+      2, {"fit", lp, "-o", (work / "a.ptm").string(), "--normals", (work / "n.png").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(count_lines(r.err, "ptmkit: error"), 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("in one process"));
+  // Commands other than fit run as one process.
+  r = run_mpi(2, {"synth", "--out", (work / "s").string(), "--size", "16"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("only `ptmkit fit` runs as several processes"));
+  // More processes than rows.
+  r = run_mpi(4, {"fit", lp, "-o", (work / "b.ptm").string(), "--crop", "0,0,10,3"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("4 processes for 3 rows"));
+  EXPECT_TRUE(test::list_files(work.path()).empty());
+}
+
+}  // namespace
+}  // namespace ptmkit
