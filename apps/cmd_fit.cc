@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "commands.h"
+#include "fit_batch.h"
 #include "mpi_collective.h"
 #include "progress.h"
 #include "ptmkit/core/atomic_file.h"
@@ -24,9 +25,29 @@ namespace ptmkit::app {
 
 namespace {
 
+// The fit options of this command line for each capture of --batch: everything after `fit`
+// except --batch and --report (the batch's own) and their values.
+std::vector<std::string> batch_common_options() {
+  const std::vector<std::string>& all = command_line();
+  std::vector<std::string> out;
+  std::size_t i = 1;
+  while (i < all.size() && all[i] != "fit") ++i;
+  for (++i; i < all.size(); ++i) {
+    const std::string& a = all[i];
+    if (a == "--batch" || a == "--report") {
+      ++i;
+      continue;
+    }
+    if (a.rfind("--batch=", 0) == 0 || a.rfind("--report=", 0) == 0) continue;
+    out.push_back(a);
+  }
+  return out;
+}
+
 struct FitArgs {
   std::vector<std::string> inputs;  // the .lp, or with --lights the photographs
   std::string lights_file;          // --lights
+  std::string batch;                // --batch JOBS.txt
   std::string crop;                 // --crop x,y,w,h
   std::string input_colour_space = "auto";
   std::string output;
@@ -255,8 +276,15 @@ void add_fit_command(CLI::App& root) {
       "the least-squares biquadratic in the light direction. Writes a PTM 1.2 file.");
   cmd->add_option("lights", args->inputs,
                   "Light file (.lp); its images are the capture. With --lights: the photographs, "
-                  "one per light in the light file's order")
-      ->required();
+                  "one per light in the light file's order");
+  cmd->add_option("--batch", args->batch,
+                  "Fit many captures: a jobs file with one capture per line, `LIGHTS OUTPUT "
+                  "[fit options]` (# comments; double quotes around words with blanks). The "
+                  "options given here apply to every line. Each capture is fitted by its own "
+                  "process and committed on its own; a failing one is reported and the rest "
+                  "go on. Under mpirun the captures are handed out to processes as they become "
+                  "free. Prints a table (capture, status, seconds, residual); --report writes "
+                  "it as JSON. Exit code 1 if any capture failed");
   cmd->add_option("--lights", args->lights_file,
                   "Use this light file's lights for the images given instead of its own (a "
                   "calibration capture's lights applied to an object's photos from the same "
@@ -279,8 +307,7 @@ void add_fit_command(CLI::App& root) {
                 "Accept photos whose decoder reports damaged data (a truncated JPEG, corrupt "
                 "blocks) with a warning; by default they are errors");
   cmd->add_option("-o,--output", args->output,
-                  "Output file: .ptm for the ptm model, .rti for hsh2/3/4")
-      ->required();
+                  "Output file: .ptm for the ptm model, .rti for hsh2/3/4");
   cmd->add_option("--model", args->model,
                   "Basis: ptm (the 6-term polynomial, .ptm output), hsh2, hsh3, hsh4 "
                   "(hemispherical harmonics, 4/9/16 terms, .rti output), or auto (chosen per "
@@ -357,6 +384,21 @@ void add_fit_command(CLI::App& root) {
                 "Skip the residual statistics (a few percent of a large fit's time)");
   cmd->callback([args, cmd] {
     args->format_given = cmd->count("--format") > 0;
+    if (!args->batch.empty()) {
+      if (!args->inputs.empty() || !args->output.empty()) {
+        throw Error(
+            "fit --batch: the captures and outputs come from the jobs file; give no "
+            "light file and no -o");
+      }
+      const int failed = run_fit_batch(args->batch, batch_common_options(), args->report);
+      if (failed > 0) {
+        throw Error("fit --batch: " + std::to_string(failed) +
+                    " capture(s) failed (see the table above)");
+      }
+      return;
+    }
+    if (args->inputs.empty()) throw Error("fit: give a light file (.lp), or --batch JOBS.txt");
+    if (args->output.empty()) throw Error("fit: give the output file with -o");
     run_fit(*args);
   });
 }

@@ -50,6 +50,7 @@ std::string subcommand_of(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  ptmkit::app::set_command_line(argc, argv);
   std::unique_ptr<ptmkit::app::MpiSession> mpi;
   try {
     mpi = std::make_unique<ptmkit::app::MpiSession>(&argc, &argv);

@@ -2,6 +2,11 @@
 // an MPI launcher (mpirun, srun), and the Collective (core/collective.h) that joins them.
 #pragma once
 
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
 #include "ptmkit/core/collective.h"
 
 namespace ptmkit::app {
@@ -29,5 +34,26 @@ class MpiSession {
 
 // The session of this process (set by MpiSession's constructor; nullptr before).
 [[nodiscard]] const MpiSession* mpi_session();
+
+// The command line main() was given (for commands that start copies of themselves).
+void set_command_line(int argc, char** argv);
+[[nodiscard]] const std::vector<std::string>& command_line();
+
+// What one child command did.
+struct ChildResult {
+  int exit_code = -1;  // 128 + signal when it was killed
+  double seconds = 0.0;
+  std::string out;  // its stdout
+  std::string err;  // its stderr
+};
+
+// Runs each of `commands` (arguments of this same ptmkit binary) as a child process, one at a
+// time per process of the job, handed out in order as processes become free (rank 0 runs
+// them too). Children never see the MPI launcher's environment: each is a plain run. Returns
+// every command's result in order on rank 0 (or the one process), nothing elsewhere.
+// `on_done(index, result)` is called on rank 0 as each finishes (progress lines).
+std::vector<ChildResult> run_children(
+    const std::vector<std::vector<std::string>>& commands, Collective* peers,
+    const std::function<void(std::size_t, const ChildResult&)>& on_done);
 
 }  // namespace ptmkit::app
