@@ -347,7 +347,8 @@ void add_fit_command(CLI::App& root) {
   cmd->add_option("--solver", args->solver,
                   "Per-texel solver: ls (shared pseudo-inverse, Cholesky), qr, svd, ridge "
                   "(lambda from --ridge, else 1e-3), irls-huber, irls-tukey, trim, sign, lambert, "
-                  "ceres-huber, ceres-cauchy, ceres-tukey, or robust (rejects shadowed and "
+                  "qtrim (drops each texel's darkest quarter and brightest tenth), ceres-huber, "
+                  "ceres-cauchy, ceres-tukey, or robust (rejects shadowed and "
                   "specular samples; = lambert). Speed and accuracy: docs/SOLVERS.md")
       ->capture_default_str()
       ->check(CLI::IsMember(fit::solver_names()));

@@ -86,9 +86,40 @@ void print_table(int size, const std::string& list) {
 }  // namespace
 }  // namespace ptmkit::fit
 
+namespace ptmkit::fit {
+namespace {
+
+// The broad-lobe render (default preset, Blinn-Phong ks and exponent replaced): every solver's
+// normals of the kept samples against the truth, PSNR and outlier precision/recall on lit
+// samples.
+void print_lobe(int size, double ks, double exponent) {
+  const auto stack = test::render_preset("default", size, ks, exponent);
+  std::printf("broad lobe: %d px, ks %.2f, exponent %.1f\n", size, ks, exponent);
+  for (const char* name : {"ls", "trim", "lambert", "qtrim", "robust"}) {
+    const auto r = test::score_solver(stack, parse_solver(name), RobustOptions{});
+    std::printf("%-10s normals %5.2f deg  psnr %6.2f  P/R lit %.3f/%.3f\n", name,
+                r.normals.mean_deg, r.psnr_db, r.outliers_lit.precision, r.outliers_lit.recall);
+  }
+}
+
+}  // namespace
+}  // namespace ptmkit::fit
+
 int main(int argc, char** argv) {
+  if (argc >= 3 && std::string(argv[1]) == "lobe") {
+    try {
+      ptmkit::fit::print_lobe(std::atoi(argv[2]), argc > 3 ? std::atof(argv[3]) : 0.25,
+                              argc > 4 ? std::atof(argv[4]) : 8.0);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "robust_quality: %s\n", e.what());
+      return 1;
+    }
+    return 0;
+  }
   if (argc < 2 || argc > 3 || std::atoi(argv[1]) < 8) {
-    std::fprintf(stderr, "usage: robust_quality SIZE(>= 8 px) [SOLVERS]\n");
+    std::fprintf(stderr,
+                 "usage: robust_quality SIZE(>= 8 px) [SOLVERS]\n"
+                 "       robust_quality lobe SIZE [KS EXPONENT]   (default 0.25 8)\n");
     return 2;
   }
   try {

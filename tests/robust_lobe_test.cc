@@ -14,45 +14,6 @@
 namespace ptmkit::fit {
 namespace {
 
-// The default preset (Lambertian relief, cast shadows, linear 8-bit) with a broad white
-// Blinn-Phong lobe: exponent 8 spreads the highlight over a cone of about 35 degrees half-width
-// (n.h^8 = 0.5 at 23 degrees of half-vector, 46 of light), and ks 0.25 keeps it below clipping
-// on most texels, as on a real glossy object photographed without clipping.
-test::SynthStack broad_lobe_stack(int size) {
-  synth::SynthOptions o = synth::preset_options("default");
-  o.width = size;
-  o.height = size;
-  o.write_truth = false;
-  o.material.ks = std::getenv("LB_KS") ? std::atof(std::getenv("LB_KS")) : 0.25;
-  o.material.exponent = std::getenv("LB_EX") ? std::atof(std::getenv("LB_EX")) : 8.0;
-  test::SynthStack s;
-  s.scene = synth::build_scene(o);
-  s.dirs = synth::resolve_lights(o);
-  for (std::size_t i = 0; i < s.dirs.size(); ++i) {
-    synth::RenderedLight r = synth::render_light(s.scene, o, s.dirs[i], static_cast<int>(i));
-    s.observed.push_back(std::move(r.observed));
-    s.diffuse.push_back(std::move(r.diffuse));
-  }
-  return s;
-}
-
-// Measurement aid (docs/SOLVERS.md): every solver's normals on the broad-lobe render; skipped
-// unless PTMKIT_ROBUST_LOBE is set. LB_SZ, LB_KS, LB_EX pick the render, LB_HK, LB_DQ the
-// robust options.
-TEST(RobustLobe, PrintsSolvers) {
-  if (std::getenv("PTMKIT_ROBUST_LOBE") == nullptr)
-    GTEST_SKIP() << "set PTMKIT_ROBUST_LOBE=1 to print the broad-lobe table";
-  const auto stack = broad_lobe_stack(std::getenv("LB_SZ") ? std::atoi(std::getenv("LB_SZ")) : 64);
-  RobustOptions ro;
-  if (std::getenv("LB_HK")) ro.highlight_k = std::atof(std::getenv("LB_HK"));
-  if (std::getenv("LB_DQ")) ro.dark_quantile = std::atof(std::getenv("LB_DQ"));
-  for (const char* name : {"ls", "trim", "lambert", "qtrim", "robust"}) {
-    const auto r = test::score_solver(stack, parse_solver(name), ro);
-    std::printf("%-10s normals %5.2f deg  psnr %6.2f  P/R lit %.3f/%.3f\n", name,
-                r.normals.mean_deg, r.psnr_db, r.outliers_lit.precision, r.outliers_lit.recall);
-  }
-}
-
 // One texel of a glossy surface tilted 30 degrees: Lambertian albedo 0.5 plus an unclipped
 // Blinn-Phong lobe (ks 0.3, exponent 8, viewer along +z) under the default preset's 49 lights,
 // two samples clipped. qtrim labels exactly floor(0.25 * 49) = 12 darkest samples shadows, the

@@ -278,16 +278,23 @@ struct TexelSolver::Impl {
       hard[static_cast<std::size_t>(i)] = labels[i] != SampleLabel::kInlier ? 1 : 0;
   }
 
+  // Least squares on the samples `labels` keeps. When they are too few or degenerate
+  // (trimming or clipping took too many): plain least squares on all, nothing rejected, and
+  // false.
+  bool fit_kept(const double* value, double* weights, SampleLabel* labels, Vec6* c) {
+    to_weights(labels, n, weights);
+    if (weighted(value, weights, c)) return true;
+    std::fill(labels, labels + n, SampleLabel::kInlier);
+    std::fill(weights, weights + n, 1.0);
+    *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
+    return false;
+  }
+
   TexelOutcome solve_trim_sign(const double* value, const std::uint8_t* saturated, double* weights,
                                SampleLabel* labels, Vec6* c) {
     TexelOutcome out;
     trim(value, saturated, labels);
-    to_weights(labels, n, weights);
-    if (!weighted(value, weights, c)) {
-      // Trimming left a degenerate set: plain least squares, nothing rejected.
-      std::fill(labels, labels + n, SampleLabel::kInlier);
-      std::fill(weights, weights + n, 1.0);
-      *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
+    if (!fit_kept(value, weights, labels, c)) {
       out.fallback = true;
       return out;
     }
@@ -385,14 +392,7 @@ struct TexelSolver::Impl {
                               SampleLabel* labels, Vec6* c) {
     TexelOutcome out;
     quantile_trim(value, saturated, labels);
-    to_weights(labels, n, weights);
-    if (!weighted(value, weights, c)) {
-      // Too few or degenerate kept samples (most clipped): plain least squares.
-      std::fill(labels, labels + n, SampleLabel::kInlier);
-      std::fill(weights, weights + n, 1.0);
-      *c = pinv * Eigen::Map<const Eigen::VectorXd>(value, n);
-      out.fallback = true;
-    }
+    if (!fit_kept(value, weights, labels, c)) out.fallback = true;
     for (int i = 0; i < n; ++i) {
       out.shadows += labels[i] == SampleLabel::kShadow ? 1 : 0;
       out.highlights += labels[i] == SampleLabel::kHighlight ? 1 : 0;

@@ -19,11 +19,17 @@ struct SynthStack {
 };
 
 // A preset rendered at size x size (the relief scales with the width).
-inline SynthStack render_preset(const std::string& preset, int size) {
+// A preset rendered at size x size; ks and exponent, when given (> 0), replace its specular
+// lobe (the default preset with ks 0.25, exponent 8 is the broad, unclipped lobe of
+// docs/SOLVERS.md).
+inline SynthStack render_preset(const std::string& preset, int size, double ks = -1.0,
+                                double exponent = -1.0) {
   synth::SynthOptions o = synth::preset_options(preset);
   o.width = size;
   o.height = size;
   o.write_truth = false;
+  if (ks >= 0.0) o.material.ks = ks;
+  if (exponent > 0.0) o.material.exponent = exponent;
   SynthStack s;
   s.scene = synth::build_scene(o);
   s.dirs = synth::resolve_lights(o);
