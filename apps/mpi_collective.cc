@@ -1,5 +1,6 @@
 #include "mpi_collective.h"
 
+#include <dlfcn.h>
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -19,13 +20,7 @@
 
 #include <cerrno>
 
-#ifdef PTMKIT_HAVE_MPI
-// The C interface only (MPI's C++ bindings are deprecated and need their own library).
-#define OMPI_SKIP_MPICXX 1
-#define MPICH_SKIP_MPICXX 1
-#include <mpi.h>
-#endif
-
+#include "mpi_runtime.h"
 #include "ptmkit/core/error.h"
 
 namespace ptmkit::app {
@@ -46,77 +41,53 @@ int launched_size() {
   return 0;
 }
 
-#ifdef PTMKIT_HAVE_MPI
+MpiRuntime* g_runtime = nullptr;
 
-class MpiCollective final : public Collective {
- public:
-  MpiCollective() {
-    MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
-    MPI_Comm_size(MPI_COMM_WORLD, &size_);
-  }
-  [[nodiscard]] int rank() const override { return rank_; }
-  [[nodiscard]] int size() const override { return size_; }
-  void min(double* v, std::size_t n) override { reduce(v, n, MPI_DOUBLE, MPI_MIN); }
-  void max(double* v, std::size_t n) override { reduce(v, n, MPI_DOUBLE, MPI_MAX); }
-  void sum(double* v, std::size_t n) override { reduce(v, n, MPI_DOUBLE, MPI_SUM); }
-  void sum(std::uint64_t* v, std::size_t n) override { reduce(v, n, MPI_UINT64_T, MPI_SUM); }
-  void broadcast(std::string* text) override {
-    unsigned long long n = text->size();
-    MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, MPI_COMM_WORLD);
-    text->resize(static_cast<std::size_t>(n));
-    if (n > 0) MPI_Bcast(text->data(), static_cast<int>(n), MPI_CHAR, 0, MPI_COMM_WORLD);
-  }
-  [[nodiscard]] std::vector<std::string> gather(const std::string& text) override {
-    int n = static_cast<int>(text.size());
-    std::vector<int> sizes(rank_ == 0 ? static_cast<std::size_t>(size_) : 0);
-    MPI_Gather(&n, 1, MPI_INT, sizes.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-    std::vector<int> offsets(sizes.size());
-    int total = 0;
-    for (std::size_t i = 0; i < sizes.size(); ++i) {
-      offsets[i] = total;
-      total += sizes[i];
-    }
-    std::string all(static_cast<std::size_t>(total), '\0');
-    MPI_Gatherv(text.data(), n, MPI_CHAR, all.data(), sizes.data(), offsets.data(), MPI_CHAR, 0,
-                MPI_COMM_WORLD);
-    std::vector<std::string> out;
-    for (std::size_t i = 0; i < sizes.size(); ++i) {
-      out.push_back(
-          all.substr(static_cast<std::size_t>(offsets[i]), static_cast<std::size_t>(sizes[i])));
-    }
+// Where the MPI module may be: $PTMKIT_MPI_MODULE, beside the executable, ../lib/ptmkit from
+// it (an installed tree), and where the build put it.
+std::vector<std::filesystem::path> module_candidates() {
+  std::vector<std::filesystem::path> out;
+  if (const char* env = std::getenv("PTMKIT_MPI_MODULE"); env != nullptr && *env != '\0') {
+    out.emplace_back(env);
     return out;
   }
-  [[nodiscard]] bool all(bool ok) override {
-    if (finished_) return ok;
-    // The lowest failing rank, or size_ when every process succeeded.
-    int mine = ok ? size_ : rank_;
-    int first = size_;
-    MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
-    if (first == size_) return true;
-    // After a failed agreement every process stops: no further collective will be matched.
-    finished_ = true;
-    first_failed_ = first;
-    return false;
+  std::array<char, 4096> exe{};
+  const ssize_t n = ::readlink("/proc/self/exe", exe.data(), exe.size() - 1);
+  if (n > 0) {
+    const std::filesystem::path dir =
+        std::filesystem::path(std::string(exe.data(), static_cast<std::size_t>(n))).parent_path();
+    out.push_back(dir / "libptmkit_mpi.so");
+    out.push_back(dir / ".." / "lib" / "ptmkit" / "libptmkit_mpi.so");
   }
-  [[nodiscard]] int first_failed_rank() const override { return first_failed_; }
-  void fail() override {
-    if (!finished_) (void)all(false);
-  }
-  void finish() override { finished_ = true; }
-
- private:
-  void reduce(void* v, std::size_t n, MPI_Datatype type, MPI_Op op) {
-    MPI_Allreduce(MPI_IN_PLACE, v, static_cast<int>(n), type, op, MPI_COMM_WORLD);
-  }
-  int rank_ = 0;
-  int size_ = 1;
-  bool finished_ = false;
-  int first_failed_ = -1;
-};
-
-MpiCollective* g_mpi = nullptr;
-
+#ifdef PTMKIT_MPI_MODULE_BUILD_PATH
+  out.emplace_back(PTMKIT_MPI_MODULE_BUILD_PATH);
 #endif
+  return out;
+}
+
+// The module's runtime, or an error saying why there is none.
+MpiRuntime* load_runtime(int processes) {
+  std::string tried;
+  for (const std::filesystem::path& p : module_candidates()) {
+    std::error_code ec;
+    if (!std::filesystem::exists(p, ec)) continue;
+    void* handle = ::dlopen(p.c_str(), RTLD_NOW | RTLD_GLOBAL);
+    if (handle == nullptr) {
+      const char* why = ::dlerror();
+      tried.append(" ").append(p.string()).append(" (").append(why != nullptr ? why : "?");
+      tried.append(")");
+      continue;
+    }
+    auto* factory = reinterpret_cast<MpiRuntime* (*)()>(::dlsym(handle, "ptmkit_mpi_runtime"));
+    if (factory != nullptr) return factory();
+  }
+  throw Error("an MPI launcher started this ptmkit as one of " + std::to_string(processes) +
+              " processes, but its MPI module (libptmkit_mpi.so) " +
+              (tried.empty() ? std::string("is not installed: this build has no MPI support")
+                             : "could not be loaded:" + tried) +
+              "; rebuild with MPI (Debian: libopenmpi-dev) or run one process (each would do "
+              "the whole job)");
+}
 
 }  // namespace
 
@@ -124,28 +95,14 @@ MpiSession::MpiSession(int* argc, char*** argv) {
   g_session = this;
   const int launched = launched_size();
   if (launched == 0 || launched == 1) return;
-#ifdef PTMKIT_HAVE_MPI
-  int provided = 0;
-  // The fit's threads never call MPI: only the thread that called MPI_Init does.
-  MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided);
+  g_runtime = load_runtime(launched);
+  g_runtime->init(argc, argv);
   initialised_ = true;
-  static MpiCollective collective;
-  g_mpi = &collective;
-  if (collective.size() > 1) collective_ = &collective;
-#else
-  (void)argc;
-  (void)argv;
-  throw Error("this ptmkit was built without MPI, but an MPI launcher started it as one of " +
-              std::to_string(launched) +
-              " processes (each would do the whole job): rebuild with MPI (libopenmpi-dev) "
-              "or run one process");
-#endif
+  if (g_runtime->world().size() > 1) collective_ = &g_runtime->world();
 }
 
 MpiSession::~MpiSession() {
-#ifdef PTMKIT_HAVE_MPI
-  if (initialised_) MPI_Finalize();
-#endif
+  if (initialised_) g_runtime->finalize();
   g_session = nullptr;
 }
 
@@ -238,7 +195,6 @@ std::optional<ChildResult> reap(const Child& c, bool block) {
   return res;
 }
 
-#ifdef PTMKIT_HAVE_MPI
 // A result through MPI: exit code, seconds, then the two texts.
 std::string pack(const ChildResult& r) {
   std::string s = std::to_string(r.exit_code) + "\n" + std::to_string(r.seconds) + "\n" +
@@ -261,11 +217,6 @@ ChildResult unpack(const std::string& s) {
 constexpr int kTagRequest = 101;  // worker -> 0: "give me work" (+ the last result)
 constexpr int kTagJob = 102;      // 0 -> worker: the job index, or -1 for none left
 
-void send_text(const std::string& text, int to, int tag) {
-  MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, to, tag, MPI_COMM_WORLD);
-}
-#endif
-
 }  // namespace
 
 void set_command_line(int argc, char** argv) { g_command_line.assign(argv, argv + argc); }
@@ -282,17 +233,15 @@ std::vector<ChildResult> run_children(
     }
     return results;
   }
-#ifdef PTMKIT_HAVE_MPI
+  MpiRuntime& mpi = *g_runtime;
   const int n = static_cast<int>(commands.size());
   if (peers->rank() != 0) {
     // Ask for work, run it, send the result with the next request.
     std::string last;
     int last_index = -1;
     for (;;) {
-      const std::string msg = std::to_string(last_index) + "\n" + last;
-      send_text(msg, 0, kTagRequest);
-      int index = -1;
-      MPI_Recv(&index, 1, MPI_INT, 0, kTagJob, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      mpi.send_text(std::to_string(last_index) + "\n" + last, 0, kTagRequest);
+      const int index = mpi.receive_int(0, kTagJob);
       if (index < 0) return {};
       last = pack(*reap(start_child(commands[static_cast<std::size_t>(index)]), true));
       last_index = index;
@@ -303,6 +252,10 @@ std::vector<ChildResult> run_children(
   int workers_left = peers->size() - 1;
   std::optional<Child> own;
   int own_index = -1;
+  const auto record = [&](int index, ChildResult r) {
+    results[static_cast<std::size_t>(index)] = std::move(r);
+    if (on_done) on_done(static_cast<std::size_t>(index), results[static_cast<std::size_t>(index)]);
+  };
   while (workers_left > 0 || own || next < n) {
     bool busy = false;
     if (!own && next < n) {
@@ -310,33 +263,19 @@ std::vector<ChildResult> run_children(
       own = start_child(commands[static_cast<std::size_t>(own_index)]);
       busy = true;
     }
-    int flag = 0;
-    MPI_Status status;
-    MPI_Iprobe(MPI_ANY_SOURCE, kTagRequest, MPI_COMM_WORLD, &flag, &status);
-    if (flag != 0) {
-      int bytes = 0;
-      MPI_Get_count(&status, MPI_CHAR, &bytes);
-      std::string msg(static_cast<std::size_t>(bytes), '\0');
-      MPI_Recv(msg.data(), bytes, MPI_CHAR, status.MPI_SOURCE, kTagRequest, MPI_COMM_WORLD,
-               MPI_STATUS_IGNORE);
-      const std::size_t nl = msg.find('\n');
-      const int done = std::stoi(msg.substr(0, nl));
-      if (done >= 0) {
-        results[static_cast<std::size_t>(done)] = unpack(msg.substr(nl + 1));
-        if (on_done)
-          on_done(static_cast<std::size_t>(done), results[static_cast<std::size_t>(done)]);
-      }
-      int index = next < n ? next++ : -1;
+    if (auto msg = mpi.poll_text(kTagRequest)) {
+      const std::string& text = msg->second;
+      const std::size_t nl = text.find('\n');
+      const int done = std::stoi(text.substr(0, nl));
+      if (done >= 0) record(done, unpack(text.substr(nl + 1)));
+      const int index = next < n ? next++ : -1;
       if (index < 0) --workers_left;
-      MPI_Send(&index, 1, MPI_INT, status.MPI_SOURCE, kTagJob, MPI_COMM_WORLD);
+      mpi.send_int(index, msg->first, kTagJob);
       busy = true;
     }
     if (own) {
       if (std::optional<ChildResult> r = reap(*own, false)) {
-        results[static_cast<std::size_t>(own_index)] = std::move(*r);
-        if (on_done)
-          on_done(static_cast<std::size_t>(own_index),
-                  results[static_cast<std::size_t>(own_index)]);
+        record(own_index, std::move(*r));
         own.reset();
         busy = true;
       }
@@ -344,10 +283,6 @@ std::vector<ChildResult> run_children(
     if (!busy) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   return results;
-#else
-  (void)on_done;
-  throw Error("run_children: several processes without MPI");
-#endif
 }
 
 }  // namespace ptmkit::app
