@@ -5,11 +5,18 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <ostream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -179,6 +186,75 @@ TEST_F(MpiFit, AFailingProcessStopsTheJobWithOneMessageAndNoOutput) {
   EXPECT_THAT(r.err, HasSubstr("image_049.png"));
   EXPECT_EQ(test::slurp(out), "what was there before");
   const std::vector<std::string> left = leftovers(work.path(), {"out.ptm"});
+  EXPECT_TRUE(left.empty()) << left.size() << " files left, e.g. " << (left.empty() ? "" : left[0]);
+}
+
+// Processes whose command line holds `needle` and that are not the launcher itself.
+std::vector<pid_t> ranks_with(const std::string& needle) {
+  std::vector<pid_t> out;
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string name = e.path().filename().string();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::string cmd = test::slurp(e.path() / "cmdline");
+    for (char& c : cmd) c = c == '\0' ? ' ' : c;
+    if (cmd.find(needle) == std::string::npos || cmd.find("mpirun") != std::string::npos ||
+        cmd.find("mpiexec") != std::string::npos || cmd.find("orterun") != std::string::npos) {
+      continue;
+    }
+    out.push_back(static_cast<pid_t>(std::stol(name)));
+  }
+  return out;
+}
+
+TEST_F(MpiFit, AKilledProcessEndsTheJobAndLeavesNoOutput) {
+  // A slow solver (Ceres per texel) so the job is still running when one process is killed.
+  test::ScratchDir work;
+  const fs::path out = work / "killed.ptm";
+  std::vector<std::string> argv{kMpiexec,
+                                "-np",
+                                "2",
+                                "--oversubscribe",
+                                PTMKIT_BINARY,
+                                "fit",
+                                (at("cap") / "lights.lp").string(),
+                                "-o",
+                                out.string(),
+                                "--solver",
+                                "ceres-huber",
+                                "--threads",
+                                "1"};
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  std::vector<char*> args;
+  for (std::string& a : argv) args.push_back(a.data());
+  args.push_back(nullptr);
+  const pid_t job = ::fork();
+  if (job == 0) {
+    const int null_fd = ::open("/dev/null", O_WRONLY);
+    ::dup2(null_fd, 1);
+    ::dup2(null_fd, 2);
+    ::execvp(args[0], args.data());
+    ::_exit(127);
+  }
+  // Wait for the two processes, then kill one of them.
+  std::vector<pid_t> ranks;
+  for (int i = 0; i < 400 && ranks.size() < 2; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    ranks = ranks_with(out.string());
+  }
+  ASSERT_EQ(ranks.size(), 2u) << "the job's processes did not appear";
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  int status = 0;
+  ASSERT_EQ(::waitpid(job, &status, WNOHANG), 0) << "the job ended before the kill";
+  ASSERT_EQ(::kill(ranks.back(), SIGKILL), 0);
+  ::waitpid(job, &status, 0);
+  EXPECT_FALSE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "the job reported success";
+  EXPECT_FALSE(fs::exists(out));
+  // What a killed process may leave (rank 0's hidden temporary) goes with the next run there.
+  const test::RunResult next = test::run_ptmkit(
+      {"fit", (at("cap") / "lights.lp").string(), "-o", (work / "next.ptm").string()});
+  ASSERT_EQ(next.exit_code, 0) << next.err;
+  const std::vector<std::string> left = leftovers(work.path(), {"next.ptm"});
   EXPECT_TRUE(left.empty()) << left.size() << " files left, e.g. " << (left.empty() ? "" : left[0]);
 }
 
