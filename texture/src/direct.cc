@@ -139,19 +139,33 @@ Image render_direct(const std::vector<Image>& photos, const LightTriangulation& 
 DirectReport direct_from_light_set(const LightSet& lights, const Eigen::Vector3d& light_dir,
                                    const std::filesystem::path& output) {
   const LightTriangulation tri(lights.directions());
-  std::vector<Image> photos;
+  // Every photo's header is checked (one size and channel count), but only the (at most
+  // three) photos the light blends are decoded: a capture's stack is never held whole.
+  const ImageInfo first = probe_image(lights.lights.front().image);
   for (const auto& l : lights.lights) {
-    photos.push_back(read_image(l.image));
-    const Image& p = photos.back();
-    if (p.width() != photos.front().width() || p.height() != photos.front().height() ||
-        p.channels() != photos.front().channels())
+    const ImageInfo p = probe_image(l.image);
+    if (p.width != first.width || p.height != first.height || p.channels != first.channels) {
       throw Error(where(l.image) + ": size or channels differ from " +
                   lights.lights.front().image.string());
+    }
   }
   DirectReport rep;
-  const Image img = render_direct(photos, tri, light_dir, &rep.weights);
+  const Eigen::Vector3d n = normalised_light(light_dir);
+  Image img(first.width, first.height, first.channels, first.colour_space, 0.0f);
+  if (n.z() > 0.0) {
+    rep.weights = tri.weights(n);
+    for (int k = 0; k < 3; ++k) {
+      const double wk = rep.weights.weight[static_cast<std::size_t>(k)];
+      if (wk == 0.0) continue;
+      const auto index = static_cast<std::size_t>(rep.weights.index[static_cast<std::size_t>(k)]);
+      const Image p = read_image(lights.lights[index].image);
+      for (std::size_t i = 0; i < img.size(); ++i) {
+        img.data()[i] += static_cast<float>(wk * p.data()[i]);
+      }
+    }
+  }
   write_image(output, img.view());
-  rep.photos = static_cast<int>(photos.size());
+  rep.photos = static_cast<int>(lights.size());
   rep.triangles = static_cast<int>(tri.triangles().size());
   rep.width = img.width();
   rep.height = img.height();

@@ -50,7 +50,9 @@ struct DirectReport {
   int triangles = 0;
   int width = 0, height = 0;
 };
-// Reads the .lp's photos, renders `light_dir` and writes `output` atomically.
+// Renders `light_dir` from the .lp's photos and writes `output` atomically. Checks every
+// photo's header (one size and channel count) but decodes only the (at most three) photos
+// the light blends.
 DirectReport direct_from_light_set(const LightSet& lights, const Eigen::Vector3d& light_dir,
                                    const std::filesystem::path& output);
 
