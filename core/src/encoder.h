@@ -13,4 +13,10 @@ namespace ptmkit::internal {
 void write_png(const std::filesystem::path& target, const std::filesystem::path& path, int width,
                int height, int channels, bool sixteen_bit, const void* pixels, ColourSpace colour);
 
+// Writes tightly packed 8-bit grey or RGB samples as JPEG (baseline, `quality` 1..100, the
+// library's default 4:2:0 chroma and accurate integer DCT) into `path`. Every libjpeg error
+// (a full disk included) and the close throw ptmkit::Error naming `target`.
+void write_jpeg(const std::filesystem::path& target, const std::filesystem::path& path, int width,
+                int height, int channels, const unsigned char* pixels, int quality);
+
 }  // namespace ptmkit::internal

@@ -178,6 +178,9 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
   if (ext == ".png") {
     internal::write_png(path, out_file.temp_path(), image.width, image.height, image.channels,
                         options.format == PixelFormat::kU16, pixels, image.colour_space);
+  } else if ((ext == ".jpg" || ext == ".jpeg") && (image.channels == 1 || image.channels == 3)) {
+    internal::write_jpeg(path, out_file.temp_path(), image.width, image.height, image.channels,
+                         u8.data(), std::clamp(options.jpeg_quality, 1, 100));
   } else {
     internal::oiio_write(path, out_file.temp_path(), image.width, image.height, image.channels,
                          options.format, pixels, stride_bytes, image.colour_space,
