@@ -12,7 +12,7 @@ set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 seconds="${1:-20}"
 build="${2:-$root/build/fuzz}"
-targets=(lp ptm rti json image)
+targets=(lp ptm rti json image web)
 bash "$root/scripts/install-deps.sh"
 if ! grep -q '^PTMKIT_FUZZ:BOOL=ON' "$build/CMakeCache.txt" 2>/dev/null; then
   CC=clang CXX=clang++ cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
