@@ -1,0 +1,438 @@
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+#include "sphere_stack_detail.h"
+
+namespace ptmkit::calib::stack_detail {
+
+// ---- Candidates. ---------------------------------------------------------------------------
+
+// Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r: the
+// largest radial derivative of the smoothed composite, at least 2 grey levels a pixel, to a
+// sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the others.
+std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
+                                       int* inside) {
+  constexpr int kRays = 360;
+  std::vector<Eigen::Vector2d> out;
+  *inside = 0;
+  const double step = std::max(0.35, r / 200.0);
+  std::vector<double> prof;
+  for (int k = 0; k < kRays; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / kRays;
+    const Eigen::Vector2d dir(std::cos(a), std::sin(a));
+    const Eigen::Vector2d near = c + 1.02 * r * dir;
+    if (near.x() < 1 || near.y() < 1 || near.x() > f.cols - 2 || near.y() > f.rows - 2) continue;
+    ++*inside;
+    prof.clear();
+    const double t0 = 0.7 * r;
+    for (double t = t0; t <= 1.3 * r; t += step) {
+      const Eigen::Vector2d p = c + t * dir;
+      if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
+      const int x0 = static_cast<int>(p.x()), y0 = static_cast<int>(p.y());
+      const double fx = p.x() - x0, fy = p.y() - y0;
+      const float* r0 = f.ptr<float>(y0);
+      const float* r1 = f.ptr<float>(std::min(y0 + 1, f.rows - 1));
+      const int x1 = std::min(x0 + 1, f.cols - 1);
+      prof.push_back((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) +
+                     fy * ((1 - fx) * r1[x0] + fx * r1[x1]));
+    }
+    double best = 0.0;
+    std::size_t bi = 0;
+    for (std::size_t i = 1; i + 1 < prof.size(); ++i) {
+      const double g = std::abs(prof[i + 1] - prof[i - 1]) / (2.0 * step);
+      if (g > best) {
+        best = g;
+        bi = i;
+      }
+    }
+    if (best < 2.0) continue;
+    double off = 0.0;
+    if (bi >= 2 && bi + 2 < prof.size()) {
+      const double gm = std::abs(prof[bi] - prof[bi - 2]), gp = std::abs(prof[bi + 2] - prof[bi]);
+      const double g0 = 2.0 * step * best;
+      const double den = gm - 2.0 * g0 + gp;
+      if (std::abs(den) > 1e-12) off = std::clamp(0.5 * (gm - gp) / den, -0.5, 0.5);
+    }
+    out.push_back(c + (t0 + (static_cast<double>(bi) + off) * step) * dir);
+  }
+  return out;
+}
+
+// A circle through the edge points that most of them support: circles through three points
+// (a fixed pseudo-random sequence, so runs agree), the one with most points within
+// max(1 px, 1% r), refitted to those. `rim` = supporting points / 360.
+Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& rough, double* rim) {
+  *rim = 0.0;
+  if (pts.size() < 8) return rough;
+  std::uint64_t state = 0x9E3779B97F4A7C15ull;
+  auto next = [&](std::size_t n) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<std::size_t>((state >> 33) % n);
+  };
+  auto count = [&](const Circle& c, std::vector<Eigen::Vector2d>* in) {
+    const double tol = std::max(1.0, 0.01 * c.radius_px);
+    int n = 0;
+    for (const auto& p : pts) {
+      if (std::abs((p - c.centre_px).norm() - c.radius_px) <= tol) {
+        ++n;
+        if (in != nullptr) in->push_back(p);
+      }
+    }
+    return n;
+  };
+  Circle best = rough;
+  int best_n = count(rough, nullptr);
+  for (int it = 0; it < 400; ++it) {
+    const Eigen::Vector2d& a = pts[next(pts.size())];
+    const Eigen::Vector2d& b = pts[next(pts.size())];
+    const Eigen::Vector2d& c = pts[next(pts.size())];
+    // Circumcentre.
+    const double d =
+        2.0 * (a.x() * (b.y() - c.y()) + b.x() * (c.y() - a.y()) + c.x() * (a.y() - b.y()));
+    if (std::abs(d) < 1e-9) continue;
+    const double a2 = a.squaredNorm(), b2 = b.squaredNorm(), c2 = c.squaredNorm();
+    Circle k;
+    k.centre_px = {(a2 * (b.y() - c.y()) + b2 * (c.y() - a.y()) + c2 * (a.y() - b.y())) / d,
+                   (a2 * (c.x() - b.x()) + b2 * (a.x() - c.x()) + c2 * (b.x() - a.x())) / d};
+    k.radius_px = (a - k.centre_px).norm();
+    if (k.radius_px < 0.75 * rough.radius_px || k.radius_px > 1.3 * rough.radius_px) continue;
+    if ((k.centre_px - rough.centre_px).norm() > 0.3 * rough.radius_px) continue;
+    const int n = count(k, nullptr);
+    if (n > best_n) {
+      best_n = n;
+      best = k;
+    }
+  }
+  for (int round = 0; round < 2; ++round) {
+    std::vector<Eigen::Vector2d> in;
+    count(best, &in);
+    if (in.size() < 8) break;
+    try {
+      best = detail::fit_circle(in);
+    } catch (const Error&) {
+      break;
+    }
+  }
+  std::vector<Eigen::Vector2d> in;
+  *rim = count(best, &in) / 360.0;
+  best.outline_px = std::move(in);
+  return best;
+}
+
+struct Composite {
+  std::string name;
+  cv::Mat small8;  // analysis size, stretched
+  cv::Mat smooth;  // the same, CV_32F grey levels, Gaussian sigma 1
+};
+
+// The 8-bit copy finds circles (Hough); the rim is measured on the unquantised one.
+Composite make_composite(std::string name, const cv::Mat& plane) {
+  Composite c{std::move(name), stretch(plane, CV_8U), stretch(plane, CV_32F)};
+  cv::GaussianBlur(c.smooth, c.smooth, cv::Size(0, 0), 1.0);
+  return c;
+}
+
+void add_hough(const cv::Mat& img8, double min_r, double max_r, const cv::Point& offset,
+               std::vector<Circle>* out) {
+  cv::Mat blur;
+  cv::GaussianBlur(img8, blur, cv::Size(5, 5), 1.5);
+  const int lo = std::max(3, static_cast<int>(std::floor(min_r)));
+  const int hi = std::max(lo + 1, static_cast<int>(std::ceil(max_r)));
+  std::vector<cv::Vec3f> circles;
+  cv::HoughCircles(blur, circles, cv::HOUGH_GRADIENT, 1.0, std::max(4.0, 0.5 * min_r), 80.0, 18.0,
+                   lo, hi);
+  for (std::size_t k = 0; k < std::min<std::size_t>(circles.size(), 12); ++k) {
+    Circle c;
+    c.centre_px = {static_cast<double>(circles[k][0]) + offset.x,
+                   static_cast<double>(circles[k][1]) + offset.y};
+    c.radius_px = circles[k][2];
+    out->push_back(c);
+  }
+}
+
+struct Scored {
+  SphereCandidate cand;     // circle in analysis pixels until the end
+  std::vector<Spot> first;  // per image: the brightest moving spot inside (area 0: none)
+};
+
+SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>& comps,
+                                const Circle& c, double min_peak) {
+  SphereCandidate out;
+  out.circle = c;
+  for (const Composite& comp : comps) {
+    int inside = 0;
+    const std::vector<Eigen::Vector2d> e =
+        ray_edges(comp.smooth, c.centre_px, c.radius_px, &inside);
+    double rim = 0.0;
+    if (inside >= 90) {
+      const double tol = std::max(1.0, 0.01 * c.radius_px);
+      for (const auto& p : e) {
+        if (std::abs((p - c.centre_px).norm() - c.radius_px) <= tol) rim += 1.0 / 360.0;
+      }
+    }
+    if (rim > out.rim) {
+      out.rim = rim;
+      out.note = "rim in the " + comp.name;
+    }
+  }
+  // The track: per image the brightest moving spot inside, compact; distinct places.
+  const double disc = std::numbers::pi * c.radius_px * c.radius_px;
+  std::vector<Eigen::Vector2d> places;
+  out.spots_px.assign(static_cast<std::size_t>(ev.n), std::nullopt);
+  for (int i = 0; i < ev.n; ++i) {
+    const std::vector<Spot> spots = moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
+    if (spots.empty()) continue;
+    const Spot& s = spots.front();
+    if (s.area > std::max(0.1 * disc, 4.0)) continue;
+    places.push_back(s.centre_small);
+    out.spots_px[static_cast<std::size_t>(i)] = s.centre_small;
+  }
+  out.moving_spots = static_cast<int>(places.size());
+  // A place is distinct when no other image's spot is within 1.5 analysis pixels (or 2% of
+  // the radius) of it.
+  const double near = std::max(1.5, 0.02 * c.radius_px);
+  for (std::size_t a = 0; a < places.size(); ++a) {
+    bool alone = true;
+    for (std::size_t b = 0; b < places.size() && alone; ++b) {
+      if (a != b && (places[a] - places[b]).norm() < near) alone = false;
+    }
+    if (alone) ++out.distinct_spots;
+  }
+  out.track = static_cast<double>(out.distinct_spots) / ev.n;
+  // A circle needs a rim (a third of the rays make it a full one) and a track: either alone
+  // is no sphere (a coin has a rim, any circle around the highlights has their track).
+  out.score = std::min(1.0, out.rim / 0.3) * out.track;
+  return out;
+}
+
+bool same_circle(const Circle& a, const Circle& b) {
+  return (a.centre_px - b.centre_px).norm() < 0.15 * std::max(a.radius_px, b.radius_px) &&
+         std::abs(a.radius_px - b.radius_px) < 0.15 * std::max(a.radius_px, b.radius_px);
+}
+
+std::string describe(const SphereCandidate& c) {
+  char buf[256];
+  std::snprintf(buf, sizeof(buf),
+                "(%.1f, %.1f) r %.1f px: score %.2f (rim %.2f, track %.2f: %d images with a "
+                "moving spot inside, %d at their own place)%s%s",
+                c.circle.centre_px.x(), c.circle.centre_px.y(), c.circle.radius_px, c.score, c.rim,
+                c.track, c.moving_spots, c.distinct_spots, c.note.empty() ? "" : "; ",
+                c.note.c_str());
+  return buf;
+}
+
+Circle to_photo(const Circle& small, int scale) {
+  Circle c;
+  const double s = scale;
+  // Analysis pixel k covers photo pixels k*s .. k*s+s-1: its centre is at k*s + (s-1)/2.
+  c.centre_px = small.centre_px * s + Eigen::Vector2d::Constant(0.5 * (s - 1));
+  c.radius_px = small.radius_px * s;
+  for (const auto& p : small.outline_px) {
+    c.outline_px.push_back(p * s + Eigen::Vector2d::Constant(0.5 * (s - 1)));
+  }
+  return c;
+}
+
+std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
+                                             double min_peak, int count, const SphereCamera& camera,
+                                             std::vector<Circle>* chosen_photo) {
+  std::vector<Composite> comps;
+  comps.push_back(make_composite("stack's maximum", ev.small_max));
+  comps.push_back(make_composite("stack's mean", ev.small_mean));
+  comps.push_back(make_composite("stack's median", ev.small_median));
+  if (!ev.reference.empty()) {
+    cv::Mat r;
+    cv::resize(ev.reference, r, cv::Size(ev.sw, ev.sh), 0, 0, cv::INTER_AREA);
+    comps.push_back(make_composite("reference photo", r));
+  }
+  const double s = ev.scale;
+  const int short_side = std::min(ev.sw, ev.sh), long_side = std::max(ev.sw, ev.sh);
+  const double min_r =
+      opt.min_radius_px > 0.0 ? opt.min_radius_px / s : std::max(5.0, short_side / 40.0);
+  const double max_r = opt.max_radius_px > 0.0 ? opt.max_radius_px / s : 0.75 * long_side;
+  // Search regions: the boxes, or the frame.
+  std::vector<cv::Rect> regions;
+  for (const PixelBox& b : opt.rois) {
+    cv::Rect r(static_cast<int>(std::floor(b.x / s)), static_cast<int>(std::floor(b.y / s)),
+               static_cast<int>(std::ceil(b.width / s)), static_cast<int>(std::ceil(b.height / s)));
+    r &= cv::Rect(0, 0, ev.sw, ev.sh);
+    if (r.width < 8 || r.height < 8) throw Error("--roi: the box is outside the images or tiny");
+    regions.push_back(r);
+  }
+  const bool boxes = !regions.empty();
+  if (!boxes) regions.emplace_back(0, 0, ev.sw, ev.sh);
+  std::vector<SphereCandidate> all;
+  std::vector<int> region_of;
+  for (std::size_t g = 0; g < regions.size(); ++g) {
+    const cv::Rect& reg = regions[g];
+    std::vector<Circle> raw;
+    const double hi = std::min(max_r, boxes ? 0.5 * std::max(reg.width, reg.height) : max_r);
+    // Radius bands of a factor 2.5 each: Hough's accumulator favours small circles otherwise.
+    for (double lo = min_r; lo < hi; lo *= 2.5) {
+      for (const Composite& comp : comps) {
+        add_hough(comp.small8(reg), lo, std::min(hi, lo * 2.5), reg.tl(), &raw);
+      }
+    }
+    for (const Circle& rough : raw) {
+      // Refined on the stretched composites' edge. What stays still (the median, the
+      // reference photo) comes first: the maximum and mean also hold the moving highlights'
+      // flares. The first with a rim on 30% of the rays is kept, else the best.
+      Circle best = rough;
+      double best_rim = -1.0;
+      for (const std::size_t k : {std::size_t{2}, std::size_t{3}, std::size_t{1}, std::size_t{0}}) {
+        if (k >= comps.size()) continue;
+        int inside = 0;
+        const std::vector<Eigen::Vector2d> e =
+            ray_edges(comps[k].smooth, rough.centre_px, rough.radius_px, &inside);
+        if (inside < 90) continue;
+        double rim = 0.0;
+        const Circle c = consensus_circle(e, rough, &rim);
+        if (rim > best_rim) {
+          best_rim = rim;
+          best = c;
+        }
+        if (rim >= 0.3) break;
+      }
+      if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
+      const bool dup = std::any_of(all.begin(), all.end(), [&](const SphereCandidate& o) {
+        return same_circle(o.circle, best);
+      });
+      if (dup) continue;
+      all.push_back(score_candidate(ev, comps, best, min_peak));
+      region_of.push_back(static_cast<int>(g));
+    }
+  }
+  std::vector<std::size_t> order(all.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return all[a].score > all[b].score; });
+  std::vector<SphereCandidate> sorted;
+  std::vector<int> sorted_region;
+  for (std::size_t k : order) {
+    sorted.push_back(all[k]);
+    sorted_region.push_back(region_of[k]);
+  }
+  for (SphereCandidate& c : sorted) {
+    c.circle = to_photo(c.circle, ev.scale);
+    for (auto& p : c.spots_px) {
+      if (p) *p = *p * ev.scale + Eigen::Vector2d::Constant(0.5 * (ev.scale - 1));
+    }
+  }
+  auto overlap = [](const SphereCandidate& a, const SphereCandidate& b) {
+    return (a.circle.centre_px - b.circle.centre_px).norm() <
+           a.circle.radius_px + b.circle.radius_px;
+  };
+  // Agreement of two candidates: the share of their common images whose spots reflect the
+  // same light (within the tolerance), 0 with fewer than 3 common images.
+  const double tol_deg = camera.focal_px > 0.0 ? 20.0 : 30.0;
+  auto agree = [&](const SphereCandidate& a, const SphereCandidate& b) {
+    int common = 0, same = 0;
+    for (std::size_t i = 0; i < a.spots_px.size(); ++i) {
+      if (!a.spots_px[i] || !b.spots_px[i]) continue;
+      ++common;
+      const Eigen::Vector3d la = reflect_highlight(a.circle, camera, *a.spots_px[i], ev.w, ev.h);
+      const Eigen::Vector3d lb = reflect_highlight(b.circle, camera, *b.spots_px[i], ev.w, ev.h);
+      const double ang = std::acos(std::clamp(la.dot(lb), -1.0, 1.0)) * 180.0 / std::numbers::pi;
+      if (ang <= tol_deg) ++same;
+    }
+    return common >= 3 ? static_cast<double>(same) / common : 0.0;
+  };
+  // Take: one per box, or the `count` best that do not overlap (for two or three spheres, the
+  // best agreeing set).
+  const int want = boxes ? static_cast<int>(regions.size()) : count;
+  std::vector<bool> region_done(regions.size(), false);
+  int taken = 0;
+  if (!boxes && (want == 2 || want == 3)) {
+    std::vector<std::size_t> pool;
+    for (std::size_t k = 0; k < sorted.size() && pool.size() < 10; ++k) {
+      if (sorted[k].score >= opt.min_score) pool.push_back(k);
+    }
+    double best_value = 0.0;
+    std::vector<std::size_t> best_set;
+    std::vector<std::size_t> set;
+    const std::function<void(std::size_t)> search = [&](std::size_t from) {
+      if (static_cast<int>(set.size()) == want) {
+        double worst = 1.0, sum = 0.0;
+        for (std::size_t x = 0; x < set.size(); ++x) {
+          sum += sorted[set[x]].score;
+          for (std::size_t y = x + 1; y < set.size(); ++y) {
+            worst = std::min(worst, agree(sorted[set[x]], sorted[set[y]]));
+          }
+        }
+        // Agreement weighs the choice but refuses nothing alone: near lights (a small dome)
+        // are seen along different directions by spheres far apart.
+        const double value = sum * (0.5 + 0.5 * worst);
+        if (value > best_value) {
+          best_value = value;
+          best_set = set;
+        }
+        return;
+      }
+      for (std::size_t q = from; q < pool.size(); ++q) {
+        const bool clash = std::any_of(set.begin(), set.end(), [&](std::size_t k) {
+          return overlap(sorted[k], sorted[pool[q]]);
+        });
+        if (clash) continue;
+        set.push_back(pool[q]);
+        search(q + 1);
+        set.pop_back();
+      }
+    };
+    search(0);
+    for (std::size_t k : best_set) sorted[k].chosen = true;
+    taken = static_cast<int>(best_set.size());
+    if (taken < want) {
+      for (std::size_t k : pool) sorted[k].note += "; no set of spheres whose highlights agree";
+    } else {
+      for (std::size_t k : pool) {
+        if (!sorted[k].chosen) sorted[k].note += "; its spots disagree with the spheres taken";
+      }
+    }
+  } else {
+    for (std::size_t k = 0; k < sorted.size() && taken < want; ++k) {
+      SphereCandidate& c = sorted[k];
+      if (c.score < opt.min_score) break;
+      if (boxes && region_done[static_cast<std::size_t>(sorted_region[k])]) continue;
+      const bool overlaps =
+          std::any_of(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
+                      [&](const SphereCandidate& o) { return o.chosen && overlap(o, c); });
+      if (overlaps) continue;
+      c.chosen = true;
+      if (boxes) region_done[static_cast<std::size_t>(sorted_region[k])] = true;
+      ++taken;
+    }
+  }
+  for (SphereCandidate& c : sorted) {
+    if (!c.chosen) {
+      c.note +=
+          c.score < opt.min_score ? "; refused: weak evidence" : "; refused: overlaps a better one";
+      if (c.track < 0.3 && c.rim >= 0.5)
+        c.note += " (round, but its bright spots do not move like a sphere's)";
+    }
+  }
+  if (taken < want) {
+    std::string msg =
+        "found " + std::to_string(taken) + " of " + std::to_string(want) +
+        " spheres with enough evidence (score >= " + std::to_string(opt.min_score).substr(0, 4) +
+        "); candidates:";
+    const std::size_t show = std::min<std::size_t>(sorted.size(), 8);
+    for (std::size_t k = 0; k < show; ++k) msg += "\n  " + describe(sorted[k]);
+    if (sorted.empty()) msg += " none";
+    msg +=
+        "\nhelp the search with --roi x,y,w,h (a box per sphere), --radius-range MIN,MAX, "
+        "--reference IMG (a photo in room light), or give --sphere cx,cy,r";
+    throw SphereSearchError(msg, sorted);
+  }
+  for (const SphereCandidate& c : sorted) {
+    if (c.chosen) chosen_photo->push_back(c.circle);
+  }
+  return sorted;
+}
+
+}  // namespace ptmkit::calib::stack_detail

@@ -1,0 +1,148 @@
+// Internal to calib: the streamed sphere search's passes (calib/src/sphere_stack.cc drives
+// them): the stack as bands (files or memory), the evidence gathered in one pass over it,
+// the spots that move from image to image, and the sphere candidates found from both.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "ptmkit/calib/sphere_stack.h"
+#include "ptmkit/core/colour.h"
+#include "ptmkit/core/image.h"
+#include "ptmkit/core/stack_reader.h"
+#include "sphere_detail.h"
+
+namespace ptmkit::calib::stack_detail {
+
+namespace fs = std::filesystem;
+
+// ---- Sources: the stack in bands of rows, from files or from memory. -----------------------
+
+class Source {
+ public:
+  virtual ~Source() = default;
+  [[nodiscard]] virtual int width() const = 0;
+  [[nodiscard]] virtual int height() const = 0;
+  [[nodiscard]] virtual int count() const = 0;
+  // Calls fn with every band, top to bottom.
+  virtual void scan(const std::function<void(const StackBand&)>& fn) const = 0;
+};
+
+class FileSource : public Source {
+ public:
+  explicit FileSource(std::vector<fs::path> files) : files_(std::move(files)) {
+    StackReader probe(files_);
+    w_ = probe.width();
+    h_ = probe.height();
+  }
+  int width() const override { return w_; }
+  int height() const override { return h_; }
+  int count() const override { return static_cast<int>(files_.size()); }
+  void scan(const std::function<void(const StackBand&)>& fn) const override {
+    StackReader reader(files_);
+    StackBand band;
+    while (reader.read_band(16, &band, BandStorage::kNative8)) fn(band);
+  }
+
+ private:
+  std::vector<fs::path> files_;
+  int w_ = 0, h_ = 0;
+};
+
+class MemorySource : public Source {
+ public:
+  explicit MemorySource(const std::vector<Image>& images) : images_(images) {}
+  int width() const override { return images_[0].width(); }
+  int height() const override { return images_[0].height(); }
+  int count() const override { return static_cast<int>(images_.size()); }
+  void scan(const std::function<void(const StackBand&)>& fn) const override {
+    StackBand band;
+    const int w = width(), h = height(), c = images_[0].channels();
+    for (int y0 = 0; y0 < h; y0 += 64) {
+      band.y0 = y0;
+      band.rows = std::min(64, h - y0);
+      band.width = w;
+      band.channels = c;
+      band.images = count();
+      band.is_u8 = false;
+      band.samples.resize(static_cast<std::size_t>(band.images) * band.image_stride());
+      for (int i = 0; i < band.images; ++i) {
+        std::copy_n(images_[static_cast<std::size_t>(i)].row(y0), band.image_stride(),
+                    band.image(i));
+      }
+      fn(band);
+    }
+  }
+
+ private:
+  const std::vector<Image>& images_;
+};
+
+inline float band_luma(const StackBand& b, int i, int row, int x) {
+  if (b.channels >= 3) {
+    return static_cast<float>(
+        luma(b.sample(i, row, x, 0), b.sample(i, row, x, 1), b.sample(i, row, x, 2)));
+  }
+  return b.sample(i, row, x, 0);
+}
+
+// ---- Pass 1: the stack's evidence (sphere_stack_evidence.cc). --------------------------------
+
+struct Evidence {
+  int w = 0, h = 0, n = 0, scale = 1, sw = 0, sh = 0;
+  std::vector<std::vector<std::uint16_t>> small;  // per image, block-max luma * 65535
+  cv::Mat full_max, full_mean;                    // CV_32F, photo size
+  cv::Mat small_max, small_median, small_mean;    // CV_32F, analysis size
+  cv::Mat reference;                              // CV_32F photo size, or empty
+  [[nodiscard]] float at(int i, int x, int y) const {
+    return static_cast<float>(small[static_cast<std::size_t>(i)][static_cast<std::size_t>(y) * sw +
+                                                                 static_cast<std::size_t>(x)]) /
+           65535.0f;
+  }
+};
+
+// One pass over the stack: each image's block-maximum luma at the analysis size (longest side
+// at most max_side), the photo-size maximum and mean, the analysis-size median and mean.
+Evidence gather(const Source& src, int max_side);
+// The luma of an image as a float plane.
+cv::Mat luma_plane(const Image& img);
+// Contrast-stretched 8-bit copy: log brightness between the 1st and 99.5th percentiles, so a
+// black ball's faint rim on a black ground shows as well as a bright one.
+cv::Mat stretch(const cv::Mat& f, int type, bool logarithm = true);
+
+// ---- Moving spots (sphere_stack_evidence.cc). -------------------------------------------------
+
+struct Spot {
+  Eigen::Vector2d centre_small;  // analysis pixels, weighted by brightness above the median
+  double peak = 0.0;             // image luma at the spot's brightest pixel
+  double lift = 0.0;             // brightest (image - median)
+  int area = 0;                  // analysis pixels
+  cv::Rect box;                  // analysis pixels
+};
+
+// The spots of image i in a disc (analysis pixels) brighter than the median by more than
+// max(0.05, half the brightest lift in the disc), and at least min_peak bright.
+std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
+                               double min_peak);
+
+// ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
+
+// Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r of the
+// smoothed composite `f`; `inside` counts the rays that stay in the frame.
+std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
+                                       int* inside);
+// The circle the rim points agree on, near `rough`; `rim` gets the share of rays that agree.
+Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& rough, double* rim);
+// The sphere candidates of the stack, scored, best first; `chosen_photo` gets the `count`
+// chosen circles in photo pixels.
+std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
+                                             double min_peak, int count, const SphereCamera& camera,
+                                             std::vector<Circle>* chosen_photo);
+
+}  // namespace ptmkit::calib::stack_detail
