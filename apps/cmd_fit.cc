@@ -387,9 +387,9 @@ void add_fit_command(CLI::App& root) {
     args->format_given = cmd->count("--format") > 0;
     if (!args->batch.empty()) {
       if (!args->inputs.empty() || !args->output.empty()) {
-        throw Error(
-            "fit --batch: the captures and outputs come from the jobs file; give no "
-            "light file and no -o");
+        throw CLI::ValidationError("--batch",
+                                   "the captures and outputs come from the jobs file; give no "
+                                   "light file and no -o");
       }
       const int failed = run_fit_batch(args->batch, batch_common_options(), args->report);
       if (failed > 0) {
@@ -398,8 +398,11 @@ void add_fit_command(CLI::App& root) {
       }
       return;
     }
-    if (args->inputs.empty()) throw Error("fit: give a light file (.lp), or --batch JOBS.txt");
-    if (args->output.empty()) throw Error("fit: give the output file with -o");
+    // Command-line errors (exit code 2), as CLI11's own.
+    if (args->inputs.empty()) {
+      throw CLI::RequiredError("a light file (.lp), or --batch JOBS.txt,");
+    }
+    if (args->output.empty()) throw CLI::RequiredError("-o,--output");
     run_fit(*args);
   });
 }

@@ -69,7 +69,7 @@ TEST(FitBatch, BadJobsFilesAreErrorsNamingTheLine) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("missing.txt"), std::string::npos) << r.err;
   r = test::run_ptmkit({"fit", "--batch", (dir / "empty.txt").string(), "x.lp"});
-  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.exit_code, 2);  // a command-line error
   EXPECT_NE(r.err.find("give no light file"), std::string::npos) << r.err;
   EXPECT_EQ(test::list_files(dir.path()).size(), 3u);
 }
