@@ -83,7 +83,9 @@ static void render(int light) {
       if (shade < 0.0) shade = 0.0;
       const double albedo = 0.55 + 0.35 * (sa[x] * cb + ca[x] * sb) * cc[x];
       const uint32_t h = hash3((uint32_t)x, (uint32_t)y, (uint32_t)light);
-      const int noise = (int)(h % 7u) - 3;
+      /* Sensor-like noise, +-5 grey levels: real quality-95 captures are 2-2.5 bits a pixel,
+       and a noiseless render would compress (and decode) far more cheaply. */
+      const int noise = (int)(h % 11u) - 5;
       for (int ch = 0; ch < 3; ++ch) {
         const double lin = albedo * tint[ch] * shade * 0.9;
         int v = to_srgb[(int)(lin * kSteps)] + noise;

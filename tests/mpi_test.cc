@@ -99,6 +99,9 @@ class MpiFit : public ::testing::Test {
       ASSERT_EQ(r.exit_code, 0) << r.err;
     };
     synth({"synth", "--out", (*dir_ / "cap").string(), "--size", "72", "--seed", "3"});
+    // JPEG: the processes below the first skip rows without decoding them.
+    synth({"synth", "--out", (*dir_ / "capj").string(), "--size", "80", "--seed", "6", "--format",
+           "jpg"});
     synth({"synth", "--out", (*dir_ / "near").string(), "--size", "64", "--seed", "4",
            "--dome-radius", "300", "--mm-per-px", "1"});
     Image mask(72, 72, 1, ColourSpace::kLinear, 0.0f);
@@ -178,6 +181,8 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{
                           "robust_lrgb", {"--solver", "robust", "--format", "lrgb"}, "cap", ".ptm"},
                       Case{"crop", {"--crop", "5,9,51,47"}, "cap", ".ptm"},
+                      Case{"jpeg_lrgb", {"--format", "lrgb"}, "capj", ".ptm"},
+                      Case{"jpeg_crop", {"--crop", "3,21,70,45"}, "capj", ".ptm"},
                       Case{"mask", {"--mask", "MASK", "--format", "lrgb"}, "cap", ".ptm"},
                       Case{"near_falloff",
                            {"--lights-json", "LIGHTS_JSON", "--plane", "PLANE", "--falloff"},

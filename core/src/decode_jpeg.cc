@@ -117,7 +117,30 @@ class JpegDecoder final : public Decoder {
     check_warnings();
   }
 
+  void skip_rows(int rows) override {
+    if (rows <= 0) return;
+    if (cinfo_.output_scanline + static_cast<JDIMENSION>(rows) > cinfo_.output_height) {
+      throw Error(where(path_) + ": read past the last row");
+    }
+    // libjpeg-turbo entropy-decodes what it must and skips the inverse DCT, upsampling and
+    // colour conversion of whole skipped rows; the rows after are decoded as they would be
+    // after reading these (the MPI tests compare every byte of the result).
+    if (!skip(static_cast<JDIMENSION>(rows))) fail("cannot decode");
+    check_warnings();
+  }
+
  private:
+  // The count lives in the object, not in a local: a longjmp may clobber locals.
+  bool skip(JDIMENSION rows) {
+    skip_left_ = rows;
+    if (setjmp(errors_.jump) != 0) return false;
+    while (skip_left_ > 0) {
+      const JDIMENSION done = jpeg_skip_scanlines(&cinfo_, skip_left_);
+      if (done == 0) return false;
+      skip_left_ -= done;
+    }
+    return true;
+  }
   bool start() {
     if (setjmp(errors_.jump) != 0) return false;
     jpeg_create_decompress(&cinfo_);
@@ -156,6 +179,7 @@ class JpegDecoder final : public Decoder {
 
   fs::path path_;
   DecodeSettings settings_;
+  JDIMENSION skip_left_ = 0;
   jpeg_decompress_struct cinfo_;
   JpegErrors errors_{};
   std::FILE* file_ = nullptr;

@@ -1,5 +1,8 @@
 #include "decoder.h"
 
+#include <algorithm>
+#include <vector>
+
 #include <array>
 #include <cstdio>
 #include <fstream>
@@ -183,6 +186,15 @@ std::unique_ptr<Decoder> open_decoder(const fs::path& path, const DecodeSettings
     if (auto d = open_tiff(path, bytes, settings)) return d;
   }
   return open_oiio(path, settings);
+}
+
+void Decoder::skip_rows(int rows) {
+  std::vector<unsigned char> scratch(row_bytes() * static_cast<std::size_t>(std::min(rows, 64)));
+  while (rows > 0) {
+    const int n = std::min(rows, 64);
+    read_rows(n, scratch.data());
+    rows -= n;
+  }
 }
 
 }  // namespace internal

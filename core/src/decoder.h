@@ -44,6 +44,10 @@ class Decoder {
   // the file's own sample type, every channel, tightly packed. Throws ptmkit::Error naming the
   // file on a decode failure or (unless allowed) on damaged data.
   virtual void read_rows(int rows, void* out) = 0;
+  // Passes over the next `rows` stored rows without returning them (a process's share of a
+  // fit starts further down). The rows after are exactly what read_rows gives after reading
+  // these. Default: read into scratch and drop; JPEG skips what it can without decoding.
+  virtual void skip_rows(int rows);
   [[nodiscard]] std::size_t row_bytes() const {
     const std::size_t sample = header_.format == PixelFormat::kU8    ? 1
                                : header_.format == PixelFormat::kU16 ? 2

@@ -158,14 +158,12 @@ void StackReader::Impl::read_image_rows(std::size_t i, int y0, int n_rows, std::
   };
   if (h.orientation == 1) {
     const int first = r.y + y0;
-    // Rows above the region (or skipped) are decoded and dropped: JPEG and most TIFFs cannot
-    // seek to a row.
+    // Rows above the region (or another process's share) are passed over: JPEG entropy-decodes
+    // them only, other formats decode and drop them (PNG and strip TIFF cannot seek to a row).
     const std::size_t row_bytes = s.decoder->row_bytes();
-    while (s.next_stored_row < first) {
-      const int skip = std::min(first - s.next_stored_row, 64);
-      s.rows.resize(row_bytes * static_cast<std::size_t>(skip));
-      s.decoder->read_rows(skip, s.rows.data());
-      s.next_stored_row += skip;
+    if (s.next_stored_row < first) {
+      s.decoder->skip_rows(first - s.next_stored_row);
+      s.next_stored_row = first;
     }
     // The common case, 8-bit rows read whole into an 8-bit band: straight into the band.
     if (u8 != nullptr && same_layout && r.x == 0 && r.width == h.width) {
