@@ -32,26 +32,6 @@ class MpiCollective final : public Collective {
     text->resize(static_cast<std::size_t>(n));
     if (n > 0) MPI_Bcast(text->data(), static_cast<int>(n), MPI_CHAR, 0, MPI_COMM_WORLD);
   }
-  [[nodiscard]] std::vector<std::string> gather(const std::string& text) override {
-    int n = static_cast<int>(text.size());
-    std::vector<int> sizes(rank_ == 0 ? static_cast<std::size_t>(size_) : 0);
-    MPI_Gather(&n, 1, MPI_INT, sizes.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-    std::vector<int> offsets(sizes.size());
-    int total = 0;
-    for (std::size_t i = 0; i < sizes.size(); ++i) {
-      offsets[i] = total;
-      total += sizes[i];
-    }
-    std::string all(static_cast<std::size_t>(total), '\0');
-    MPI_Gatherv(text.data(), n, MPI_CHAR, all.data(), sizes.data(), offsets.data(), MPI_CHAR, 0,
-                MPI_COMM_WORLD);
-    std::vector<std::string> out;
-    for (std::size_t i = 0; i < sizes.size(); ++i) {
-      out.push_back(
-          all.substr(static_cast<std::size_t>(offsets[i]), static_cast<std::size_t>(sizes[i])));
-    }
-    return out;
-  }
   [[nodiscard]] bool all(bool ok) override {
     if (finished_) return ok;
     // The lowest failing rank, or size_ when every process succeeded.

@@ -133,4 +133,28 @@ void PageMemory::release() {
   bytes_ = 0;
 }
 
+RawFile open_shared_output(Collective* peers, const std::filesystem::path& target,
+                           std::string_view head, std::optional<AtomicOutput>* out) {
+  RawFile file;
+  std::string temp;
+  if (peers == nullptr || peers->rank() == 0) {
+    try {
+      out->emplace(target);
+      temp = (*out)->temp_path().string();
+      file = RawFile::create(temp, target);
+      file.write_at(head.data(), head.size(), 0, target);
+    } catch (const Error&) {
+      // The others stop at the agreement below; this process's own error is the message.
+      if (peers != nullptr) (void)peers->all(false);
+      throw;
+    }
+  }
+  if (peers != nullptr) {
+    peers->agree(true, where(target));
+    peers->broadcast(&temp);
+    if (peers->rank() != 0) file = RawFile::open_for_writing(temp, target);
+  }
+  return file;
+}
+
 }  // namespace ptmkit

@@ -551,26 +551,7 @@ void PtmStreamWriter::end() {
   } wait_relit{relit};
   // Rank 0 (or the one process) creates the temporary; the others write into it.
   std::optional<AtomicOutput> out;
-  RawFile file;
-  std::filesystem::path temp;
-  if (peers == nullptr || peers->rank() == 0) {
-    try {
-      out.emplace(path_);
-      temp = out->temp_path();
-      file = RawFile::create(temp, path_);
-      file.write_at(header.data(), header.size(), 0, path_);
-    } catch (const Error&) {
-      // The others stop at the agreement below; this process's own error is the message.
-      if (peers != nullptr) (void)peers->all(false);
-      throw;
-    }
-  }
-  if (peers != nullptr) {
-    peers->agree(true, where(path_));
-    std::string name = temp.string();
-    peers->broadcast(&name);
-    if (peers->rank() != 0) file = RawFile::open_for_writing(name, path_);
-  }
+  RawFile file = open_shared_output(peers, path_, header, &out);
   {
     const std::size_t data0 = header.size();
     // Slices of kSliceRows stored rows, through a pipeline: slices read their half floats

@@ -147,22 +147,7 @@ RtiWriteReport write_rti_rows(const fs::path& path, const CoefficientMap& map,
   } else {
     // Rank 0 creates the temporary and writes the header; every process its rows.
     std::optional<AtomicOutput> out;
-    RawFile file;
-    std::string temp;
-    if (peers->rank() == 0) {
-      try {
-        out.emplace(path);
-        temp = out->temp_path().string();
-        file = RawFile::create(temp, path);
-        file.write_at(head.data(), head.size(), 0, path);
-      } catch (const Error&) {
-        (void)peers->all(false);
-        throw;
-      }
-    }
-    peers->agree(true, where(path));
-    peers->broadcast(&temp);
-    if (peers->rank() != 0) file = RawFile::open_for_writing(temp, path);
+    RawFile file = open_shared_output(peers, path, head, &out);
     file.write_at(bytes.data(), bytes.size(),
                   data0 + row_bytes * static_cast<std::size_t>(row_offset), path);
     file.close(path);

@@ -38,8 +38,6 @@ class Collective {
   virtual void sum(std::uint64_t* values, std::size_t n) = 0;
   // Rank 0's text on every process.
   virtual void broadcast(std::string* text) = 0;
-  // Every process's text, in rank order, on rank 0 (empty elsewhere).
-  [[nodiscard]] virtual std::vector<std::string> gather(const std::string& text) = 0;
 
   // An agreement: true on every process when `ok` is true on every process (also a barrier).
   [[nodiscard]] virtual bool all(bool ok) = 0;

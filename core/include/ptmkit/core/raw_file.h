@@ -6,7 +6,12 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <optional>
+#include <string_view>
 #include <utility>
+
+#include "ptmkit/core/atomic_file.h"
+#include "ptmkit/core/collective.h"
 
 namespace ptmkit {
 
@@ -57,6 +62,14 @@ class RawFile {
 // Drops the clean cached pages of the regular file at `path` (its contents are untouched);
 // anything else at the path (nothing, a symbolic link, a FIFO, a device) is left alone.
 void drop_cached_pages(const std::filesystem::path& path);
+
+// The output file of a write shared by the processes of a job (core/collective.h; `peers`
+// nullptr: one process). Rank 0 creates `target`'s temporary into *out and writes `head` at
+// offset 0; after an agreement (rank 0's failure to create it stops every process, its own
+// error propagating) the others open the same temporary. Returns this process's handle for
+// positioned writes; rank 0 commits *out after its own agreement that every part is written.
+[[nodiscard]] RawFile open_shared_output(Collective* peers, const std::filesystem::path& target,
+                                         std::string_view head, std::optional<AtomicOutput>* out);
 
 // Anonymous memory in whole pages: the kernel's zero pages, first touched by whoever fills
 // them; parts can be given back once no longer needed.
