@@ -13,7 +13,6 @@
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/core/plane.h"
-#include "ptmkit/core/stack_reader.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/plan.h"
 #include "ptmkit/texture/ptm.h"
@@ -139,49 +138,6 @@ CoefficientWriter make_writer(fit::CoefficientFormat format, const fs::path& pat
   return w;
 }
 
-// Plans the fit; under MPI with --model auto, rank 0 chooses the model (on the whole capture)
-// and the others fit what it chose.
-fit::FitPlan plan_everywhere(const LightSet& lights, fit::FitRequest request, Collective* peers) {
-  if (peers == nullptr || request.model != fit::ModelRequest::kAuto) {
-    return fit::plan_fit(lights, request);
-  }
-  fit::FitPlan plan;
-  std::string chosen;
-  if (peers->rank() == 0) {
-    plan = fit::plan_fit(lights, request);
-    chosen = std::string(fit::to_string(plan.options.basis)) + " " +
-             std::string(to_string(plan.options.model));
-  }
-  peers->agree(true, "model selection");
-  peers->broadcast(&chosen);
-  if (peers->rank() == 0) return plan;
-  const std::size_t space = chosen.find(' ');
-  request.model = fit::parse_model_request(chosen.substr(0, space));
-  request.options.model = parse_colour_model(chosen.substr(space + 1));
-  request.colour_given = true;
-  return fit::plan_fit(lights, request);
-}
-
-// Under MPI: this process's rows of the region the fit reads (after crop and mask).
-Share share_rows(Collective* peers, const LightSet& lights, fit::FitOptions* options) {
-  Share share;
-  if (peers == nullptr) return share;
-  int height = 0;
-  {
-    const StackReader probe(lights.images(), options->input);
-    height = probe.height();
-  }
-  if (height < peers->size()) {
-    throw Error("fit: " + std::to_string(peers->size()) + " processes for " +
-                std::to_string(height) + " rows; start at most one process per row");
-  }
-  share.peers = peers;
-  share.full_height = height;
-  share.rows = rows_of_rank(height, peers->rank(), peers->size());
-  options->input.rows = share.rows;
-  return share;
-}
-
 void run_fit(const FitArgs& args) {
   // Flags -> request.
   fit::FitRequest request;
@@ -225,8 +181,12 @@ void run_fit(const FitArgs& args) {
   if (!args.plane.empty()) request.options.near.plane = read_plane_json(args.plane);
 
   // One library call each: plan (model, format, what goes together), fit.
-  fit::FitPlan plan = plan_everywhere(lights, request, peers);
-  const Share share = share_rows(peers, lights, &plan.options);
+  fit::FitPlan plan = fit::plan_fit(lights, request, peers);
+  Share share;
+  if (peers != nullptr) {
+    const fit::RowShare rows = fit::share_rows(lights, *peers, &plan.options);
+    share = Share{peers, rows.rows, rows.full_height};
+  }
   if (plan.selection && lead) {
     std::printf("model selection: %d texels (every %d px), %d folds over %d lights, %.2f s\n%s",
                 plan.selection->texels, plan.selection->stride, plan.selection->folds,

@@ -1,6 +1,7 @@
 // The direct decoders (JPEG, PNG, TIFF) against OpenImageIO, bounded and strict decoding,
 // EXIF orientation, and the fit's real-capture input options on the command line.
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 
@@ -247,6 +248,63 @@ TEST(ImageDecode, TruncatedJpegIsAnErrorUnlessDamageIsAllowed) {
   EXPECT_EQ(repaired.width(), 64);
 }
 
+// A layout the direct TIFF reader leaves to OpenImageIO (planes stored separately), its last
+// strips cut off: OpenImageIO fills what it cannot read and says so; that is damaged data too.
+TEST(ImageDecode, DamagedDataOpenImageIOFillsInIsAnErrorUnlessAllowed) {
+  test::ScratchDir dir;
+  {
+    auto out = OIIO::ImageOutput::create((dir / "planar.tif").string());
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("tiff:planarconfig", "separate");
+    spec.attribute("compression", "none");
+    spec.attribute("tiff:RowsPerStrip", 8);
+    ASSERT_TRUE(out->open((dir / "planar.tif").string(), spec));
+    std::vector<std::uint8_t> px(64 * 64 * 3);
+    for (std::size_t k = 0; k < px.size(); ++k) px[k] = static_cast<std::uint8_t>(k * 7);
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    ASSERT_TRUE(out->close());
+  }
+  ASSERT_EQ(read_image(dir / "planar.tif").width(), 64);
+  std::string bytes = slurp(dir / "planar.tif");
+  // The last entry of StripOffsets (tag 273) pointed far beyond the file's end.
+  auto u32_at = [&](std::size_t at) {
+    std::uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return v;
+  };
+  ASSERT_EQ(bytes.substr(0, 2), "II");
+  const std::uint32_t ifd = u32_at(4);
+  std::uint16_t entries = 0;
+  std::memcpy(&entries, bytes.data() + ifd, 2);
+  std::size_t last = 0;
+  std::size_t width = 0;
+  for (std::uint16_t e = 0; e < entries; ++e) {
+    const std::size_t at = ifd + 2 + 12 * std::size_t{e};
+    std::uint16_t tag = 0;
+    std::uint16_t type = 0;
+    std::memcpy(&tag, bytes.data() + at, 2);
+    std::memcpy(&type, bytes.data() + at + 2, 2);
+    if (tag != 273) continue;
+    width = type == 3 ? 2 : 4;
+    const std::uint32_t count = u32_at(at + 4);
+    ASSERT_GT(count * width, 4U) << "strip offsets held inline";
+    last = u32_at(at + 8) + (count - 1) * width;
+  }
+  ASSERT_NE(width, 0U) << "no StripOffsets";
+  ASSERT_LT(last + width, bytes.size());
+  for (std::size_t k = 0; k < width; ++k) bytes[last + k] = static_cast<char>(0x7F);
+  spit(dir / "damaged.tif", bytes);
+  try {
+    (void)read_stack({dir / "damaged.tif"});
+    FAIL() << "damaged planar TIFF accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("damaged.tif"));
+    EXPECT_THAT(e.what(), HasSubstr("damaged image data"));
+  }
+  EXPECT_EQ(read_image(dir / "damaged.tif", {.allow_damaged = true}).width(), 64);
+}
+
 TEST(ImageDecode, DeclaredSizeIsBoundedBeforeDecoding) {
   test::ScratchDir dir;
   write_image(dir / "small.jpg", pattern(16, 16, 3).view());
@@ -267,6 +325,68 @@ TEST(ImageDecode, DeclaredSizeIsBoundedBeforeDecoding) {
   }
   // Not a regular file: refused before reading.
   EXPECT_THROW((void)probe_image("/dev/zero"), Error);
+}
+
+// OpenEXR trusts its header: an attribute's declared size is allocated before it is read and
+// the chunk offset table is sized from the data window. Both are checked against the file first.
+TEST(ImageDecode, ExrHeaderIsBoundedByTheFileBeforeOpenExrReadsIt) {
+  test::ScratchDir dir;
+  write_image(dir / "ok.exr", pattern(16, 16, 3).view(), {.format = PixelFormat::kF32});
+  EXPECT_EQ(read_image(dir / "ok.exr").width(), 16);
+  const std::string good = slurp(dir / "ok.exr");
+  auto put_i32 = [](std::string* bytes, std::size_t at, std::uint32_t v) {
+    for (int k = 0; k < 4; ++k) (*bytes)[at + k] = static_cast<char>((v >> (8 * k)) & 0xFF);
+  };
+  auto expect_refused = [&](const std::string& name, const std::string& bytes,
+                            const std::string& why) {
+    spit(dir / name, bytes);
+    for (int pass = 0; pass < 2; ++pass) {
+      try {
+        if (pass == 0) {
+          (void)probe_image(dir / name);
+        } else {
+          (void)read_stack({dir / name});
+        }
+        ADD_FAILURE() << name << " was accepted";
+      } catch (const Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr(name));
+        EXPECT_THAT(e.what(), HasSubstr(why));
+      }
+    }
+  };
+  // An attribute declaring 1.8 GB in a file of a few hundred bytes.
+  const std::string attr("compression\0compression\0", 24);
+  const std::size_t at = good.find(attr);
+  ASSERT_NE(at, std::string::npos);
+  std::string huge_attr = good;
+  put_i32(&huge_attr, at + attr.size(), 0x6D500000U);
+  expect_refused("attr.exr", huge_attr, "declares 1833959424 bytes, but the file has");
+  // A data window of 16 x 200001 pixels: its offset table alone needs more than the file.
+  const std::string window("dataWindow\0box2i\0", 17);
+  const std::size_t w = good.find(window);
+  ASSERT_NE(w, std::string::npos);
+  std::string tall = good;
+  put_i32(&tall, w + window.size() + 4 + 12, 200000);
+  expect_refused("tall.exr", tall, "cannot hold");
+  // A window past the largest side accepted.
+  std::string wide = good;
+  put_i32(&wide, w + window.size() + 4 + 8, 0x7FFFFFF0U);
+  expect_refused("wide.exr", wide, "exceeds the largest side accepted");
+  // A channel list whose declared size disagrees with its content (OpenEXR reads the content).
+  const std::string chlist("channels\0chlist\0", 16);
+  const std::size_t c = good.find(chlist);
+  ASSERT_NE(c, std::string::npos);
+  std::string off_by_one = good;
+  std::uint32_t declared = 0;
+  std::memcpy(&declared, good.data() + c + chlist.size(), 4);
+  put_i32(&off_by_one, c + chlist.size(), declared + 1);
+  expect_refused("chlist.exr", off_by_one, "does not fill its declared size");
+  // Deep images (the version field's deep flag) are not photographs.
+  std::string deep = good;
+  deep[5] = static_cast<char>(deep[5] | 0x08);
+  expect_refused("deep.exr", deep, "deep OpenEXR");
+  // Cut inside the header.
+  expect_refused("cut.exr", good.substr(0, at + 10), "ends inside the header");
 }
 
 TEST(ImageDecode, ErrorMessagesQuoteOnlyAShortPrintableExcerpt) {

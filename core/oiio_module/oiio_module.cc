@@ -84,6 +84,12 @@ int read_rows(void* handle, int y0, int y1, void* out, char* err, std::size_t er
     set_error(err, err_len, r->in->geterror());
     return 0;
   }
+  // Some readers (TIFF strips that cannot be read, for one) log the error, fill the rows and
+  // report success.
+  if (r->in->has_error()) {
+    set_error(err, err_len, r->in->geterror());
+    return 2;
+  }
   return 1;
 }
 

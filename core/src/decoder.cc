@@ -95,18 +95,6 @@ ImageInfo info_from_header(const Header& h) {
   return info;
 }
 
-std::uintmax_t available_memory_bytes() {
-  std::ifstream in("/proc/meminfo");
-  std::string key;
-  std::uintmax_t value = 0;
-  std::string unit;
-  while (in >> key >> value) {
-    std::getline(in, unit);
-    if (key == "MemAvailable:") return value * 1024;
-  }
-  return 0;
-}
-
 ExifFacts parse_exif(const unsigned char* data, std::size_t size) {
   ExifFacts facts;
   if (size < 8) return facts;
@@ -184,6 +172,9 @@ std::unique_ptr<Decoder> open_decoder(const fs::path& path, const DecodeSettings
                     (magic[0] == 'M' && magic[1] == 'M' && magic[2] == 0 && magic[3] == 42);
   if (tiff) {
     if (auto d = open_tiff(path, bytes, settings)) return d;
+  }
+  if (magic[0] == 0x76 && magic[1] == 0x2F && magic[2] == 0x31 && magic[3] == 0x01) {
+    check_exr_header(path, bytes);
   }
   return open_oiio(path, settings);
 }

@@ -97,8 +97,11 @@ ExifFacts parse_exif(const unsigned char* data, std::size_t size);
 // the metadata or the sample type's default (image_io.h), and why.
 ImageInfo info_from_header(const Header& header);
 
-// Bytes of memory the system reports available (MemAvailable), or 0 if unknown.
-std::uintmax_t available_memory_bytes();
+// Checks an OpenEXR file's header (magic number already seen) before OpenEXR reads it:
+// every attribute's declared size against the bytes left in the file, the data window against
+// check_dimensions, and the chunk offset table the window implies against the file's size.
+// Deep images are refused. Throws ptmkit::Error naming the file.
+void check_exr_header(const std::filesystem::path& path, std::uintmax_t file_bytes);
 
 // Applies the settings' damaged-data policy to a decoder warning: throws unless allowed.
 void damaged_data(const std::filesystem::path& path, const DecodeSettings& settings,

@@ -14,6 +14,7 @@
 #include "orientation.h"
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -59,12 +60,9 @@ Image read_image(const fs::path& path, const ImageReadOptions& options) {
   const ImageInfo info = internal::info_from_header(h);
   const std::uintmax_t pixels = static_cast<std::uintmax_t>(h.width) * h.height * h.channels;
   const std::uintmax_t need = pixels * 4 + decoder->row_bytes() * h.height;
-  const std::uintmax_t avail = internal::available_memory_bytes();
-  if (avail != 0 && need > avail) {
-    throw Error(where(path) + ": decoding this " + std::to_string(info.width) + "x" +
-                std::to_string(info.height) + " image needs " + std::to_string(need >> 20) +
-                " MiB but only " + std::to_string(avail >> 20) + " MiB are available");
-  }
+  check_allocation(path, need,
+                   "the decoded pixels of this " + std::to_string(info.width) + "x" +
+                       std::to_string(info.height) + " image");
   const std::vector<unsigned char> native = decode_all(*decoder);
   Image img(info.width, info.height, info.channels, info.colour_space);
   const std::size_t sample = h.format == PixelFormat::kU8    ? 1

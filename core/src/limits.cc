@@ -4,9 +4,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -49,6 +52,44 @@ std::uintmax_t checked_input_size(const fs::path& path, std::uintmax_t max_bytes
   return size;
 }
 
+namespace {
+
+std::atomic<std::uint64_t> g_budget_bytes{0};
+
+// What a cgroup v2 memory limit leaves: the smallest memory.max - memory.current over the
+// process's cgroup and its ancestors (a batch scheduler's job limit may sit on either).
+std::uint64_t cgroup_room_bytes() {
+  std::ifstream self("/proc/self/cgroup");
+  std::string line;
+  std::string rel;
+  while (std::getline(self, line)) {
+    if (line.rfind("0::", 0) == 0) rel = line.substr(3);
+  }
+  std::uint64_t room = std::numeric_limits<std::uint64_t>::max();
+  if (rel.empty()) return room;
+  fs::path dir = fs::path("/sys/fs/cgroup") / fs::path(rel).relative_path();
+  for (int depth = 0; depth < 64; ++depth) {
+    std::ifstream max_file(dir / "memory.max");
+    std::ifstream current_file(dir / "memory.current");
+    std::string max_text;
+    std::uint64_t current = 0;
+    if (max_file >> max_text && max_text != "max" && current_file >> current) {
+      char* end = nullptr;
+      const unsigned long long limit = std::strtoull(max_text.c_str(), &end, 10);
+      if (end != max_text.c_str() && *end == '\0') {
+        room = std::min<std::uint64_t>(room, limit > current ? limit - current : 0);
+      }
+    }
+    if (dir == "/sys/fs/cgroup" || !dir.has_parent_path() || dir.parent_path() == dir) break;
+    dir = dir.parent_path();
+  }
+  return room;
+}
+
+}  // namespace
+
+void set_memory_budget_bytes(std::uint64_t bytes) { g_budget_bytes.store(bytes); }
+
 std::uint64_t available_memory_bytes() {
   std::uint64_t available = 0;
   std::ifstream meminfo("/proc/meminfo");
@@ -74,6 +115,9 @@ std::uint64_t available_memory_bytes() {
   if (::getrlimit(RLIMIT_AS, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY) {
     available = std::min<std::uint64_t>(available, rl.rlim_cur);
   }
+  available = std::min(available, cgroup_room_bytes());
+  const std::uint64_t budget = g_budget_bytes.load();
+  if (budget != 0) available = std::min(available, budget);
   return available;
 }
 

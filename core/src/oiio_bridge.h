@@ -10,7 +10,7 @@
 extern "C" {
 
 // Bumped whenever a signature or a struct below changes; core refuses a module of another.
-#define PTMKIT_OIIO_ABI 1
+#define PTMKIT_OIIO_ABI 2
 
 enum { kOiioU8 = 0, kOiioU16 = 1, kOiioF32 = 2 };
 enum { kOiioColourUnknown = 0, kOiioColourLinear = 1, kOiioColourSRGB = 2 };
@@ -29,7 +29,8 @@ struct PtmkitOiioApi {
   int abi;
   // Opens a file for reading; null on failure with a message in err.
   void* (*open)(const char* path, struct PtmkitOiioHeader* header, char* err, size_t err_len);
-  // Reads stored rows [y0, y1) of every channel in header->format; 0 on failure.
+  // Reads stored rows [y0, y1) of every channel in header->format. 1: read; 0: failed; 2: read,
+  // but the reader reported errors on the way (damaged data it filled in); err says which.
   int (*read_rows)(void* handle, int y0, int y1, void* out, char* err, size_t err_len);
   void (*close)(void* handle);
   // Writes an image: the type chosen by `type_path`'s extension, the bytes to `path`.

@@ -75,8 +75,8 @@ const PtmkitOiioApi* load_api(std::string* why) {
 
 class OiioDecoder final : public Decoder {
  public:
-  OiioDecoder(fs::path path, const PtmkitOiioApi* api, void* handle)
-      : path_(std::move(path)), api_(api), handle_(handle) {}
+  OiioDecoder(fs::path path, const PtmkitOiioApi* api, void* handle, DecodeSettings settings)
+      : path_(std::move(path)), api_(api), handle_(handle), settings_(settings) {}
   ~OiioDecoder() override { api_->close(handle_); }
   OiioDecoder(const OiioDecoder&) = delete;
   OiioDecoder& operator=(const OiioDecoder&) = delete;
@@ -85,10 +85,12 @@ class OiioDecoder final : public Decoder {
   void read_rows(int rows, void* out) override {
     char err[512] = {};
     if (next_row_ + rows > header_.height) throw Error(where(path_) + ": read past the last row");
-    if (api_->read_rows(handle_, next_row_, next_row_ + rows, out, err, sizeof(err)) == 0) {
+    const int status = api_->read_rows(handle_, next_row_, next_row_ + rows, out, err, sizeof(err));
+    if (status == 0) {
       throw Error(where(path_) + ": cannot decode rows " + std::to_string(next_row_) + ".." +
                   std::to_string(next_row_ + rows - 1) + ": " + excerpt(err));
     }
+    if (status == 2) damaged_data(path_, settings_, err, &warned_);
     next_row_ += rows;
   }
 
@@ -96,6 +98,8 @@ class OiioDecoder final : public Decoder {
   fs::path path_;
   const PtmkitOiioApi* api_;
   void* handle_;
+  DecodeSettings settings_;
+  bool warned_ = false;
   int next_row_ = 0;
 };
 
@@ -103,7 +107,7 @@ class OiioDecoder final : public Decoder {
 
 bool oiio_available() { return load_api(nullptr) != nullptr; }
 
-std::unique_ptr<Decoder> open_oiio(const fs::path& path, const DecodeSettings& /*settings*/) {
+std::unique_ptr<Decoder> open_oiio(const fs::path& path, const DecodeSettings& settings) {
   std::string why;
   const PtmkitOiioApi* api = load_api(&why);
   if (api == nullptr) {
@@ -113,7 +117,7 @@ std::unique_ptr<Decoder> open_oiio(const fs::path& path, const DecodeSettings& /
   char err[512] = {};
   void* handle = api->open(path.c_str(), &h, err, sizeof(err));
   if (handle == nullptr) throw Error(where(path) + ": cannot read image: " + excerpt(err));
-  auto d = std::make_unique<OiioDecoder>(path, api, handle);
+  auto d = std::make_unique<OiioDecoder>(path, api, handle, settings);
   check_dimensions(path, h.width, h.height, h.channels);
   Header& header = d->header();
   header.width = h.width;

@@ -13,6 +13,7 @@
 #include "decoder.h"
 #include "orientation.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -182,6 +183,8 @@ void StackReader::Impl::read_image_rows(std::size_t i, int y0, int n_rows, std::
     return;
   }
   if (s.stored.empty()) {
+    check_allocation(files[i], static_cast<std::uint64_t>(s.decoder->row_bytes()) * h.height,
+                     "the whole stored image (its orientation is applied after decoding)");
     s.stored.resize(s.decoder->row_bytes() * static_cast<std::size_t>(h.height));
     s.decoder->read_rows(h.height, s.stored.data());
   }
@@ -416,6 +419,13 @@ bool StackReader::read_band(int rows, StackBand* band, BandStorage storage) {
 
 std::vector<Image> read_stack(const std::vector<fs::path>& files, const StackReadOptions& options) {
   StackReader reader(files, options);
+  const std::uint64_t image_bytes = checked_multiply(
+      reader.files().front(), static_cast<std::uint64_t>(reader.width()) * reader.height(),
+      static_cast<std::uint64_t>(reader.channels()) * sizeof(float));
+  check_allocation(reader.files().front(),
+                   checked_multiply(reader.files().front(), image_bytes,
+                                    static_cast<std::uint64_t>(reader.count())),
+                   "the " + std::to_string(reader.count()) + " decoded images");
   std::vector<Image> images;
   images.reserve(files.size());
   for (int i = 0; i < reader.count(); ++i) {

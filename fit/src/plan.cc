@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/stack_reader.h"
 #include "report_json.h"
 
 namespace ptmkit::fit {
@@ -153,6 +154,42 @@ std::string FitRunReport::brief() const {
   }
   out += line;
   return out;
+}
+
+FitPlan plan_fit(const LightSet& lights, FitRequest request, Collective* peers) {
+  if (peers == nullptr || request.model != ModelRequest::kAuto) return plan_fit(lights, request);
+  FitPlan plan;
+  std::string chosen;
+  if (peers->rank() == 0) {
+    plan = plan_fit(lights, request);
+    chosen = std::string(to_string(plan.options.basis)) + " " +
+             std::string(to_string(plan.options.model));
+  }
+  peers->agree(true, "model selection");
+  peers->broadcast(&chosen);
+  if (peers->rank() == 0) return plan;
+  const std::size_t space = chosen.find(' ');
+  request.model = parse_model_request(chosen.substr(0, space));
+  request.options.model = parse_colour_model(chosen.substr(space + 1));
+  request.colour_given = true;
+  return plan_fit(lights, request);
+}
+
+RowShare share_rows(const LightSet& lights, Collective& peers, FitOptions* options) {
+  int height = 0;
+  {
+    const StackReader probe(lights.images(), options->input);
+    height = probe.height();
+  }
+  if (height < peers.size()) {
+    throw Error("fit: " + std::to_string(peers.size()) + " processes for " +
+                std::to_string(height) + " rows; start at most one process per row");
+  }
+  RowShare share;
+  share.full_height = height;
+  share.rows = rows_of_rank(height, peers.rank(), peers.size());
+  options->input.rows = share.rows;
+  return share;
 }
 
 }  // namespace ptmkit::fit

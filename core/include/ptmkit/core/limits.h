@@ -43,8 +43,14 @@ std::uintmax_t checked_input_size(const std::filesystem::path& path, std::uintma
                                   std::string_view kind);
 
 // Memory this process may still allocate, in bytes: MemAvailable plus free swap (from
-// /proc/meminfo), else the physical memory size; capped by RLIMIT_AS where one is set.
+// /proc/meminfo), else the physical memory size; capped by RLIMIT_AS where one is set, by
+// what a cgroup v2 memory limit leaves (a batch scheduler's job limit, a container's), and by
+// set_memory_budget_bytes().
 std::uint64_t available_memory_bytes();
+
+// Caps available_memory_bytes() for this process at `bytes` (0: no cap, the default), for an
+// application embedding ptmkit that keeps its own budget. Thread-safe.
+void set_memory_budget_bytes(std::uint64_t bytes);
 
 // Throws ptmkit::Error naming `path` when allocating `bytes` for `what` (e.g. "the 4096 x
 // 4096 x 16-term coefficients") would exceed available_memory_bytes().

@@ -13,6 +13,7 @@
 #include <string>
 #include <string_view>
 
+#include "ptmkit/core/collective.h"
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/model_select.h"
@@ -56,6 +57,22 @@ struct FitPlan {
 // other bases with the least-squares solvers, without maps; the output's extension. Throws
 // ptmkit::Error saying what does not go together and what would.
 [[nodiscard]] FitPlan plan_fit(const LightSet& lights, const FitRequest& request);
+
+// The same when several processes share the fit (`peers`, a collective call; null: one
+// process). With kAuto only rank 0 runs model selection, on the whole capture, and the others
+// plan what it chose, so every process fits the same model.
+[[nodiscard]] FitPlan plan_fit(const LightSet& lights, FitRequest request, Collective* peers);
+
+// One process's share of the rows the fit reads (the region after crop and mask).
+struct RowShare {
+  RowRange rows;        // in the region, [begin, end)
+  int full_height = 0;  // the region's height
+};
+
+// Splits the region's rows between `peers` (rows_of_rank) and restricts `options` to this
+// process's share (options->input.rows). Throws ptmkit::Error when there are more processes
+// than rows.
+[[nodiscard]] RowShare share_rows(const LightSet& lights, Collective& peers, FitOptions* options);
 
 // What writing the coefficients cost (texture's .ptm or .rti writer reports), kept here so a
 // run's report is one typed struct.
