@@ -95,6 +95,11 @@ void add_compare_command(CLI::App& root) {
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
   cmd->add_flag("!--no-ssim", args->options.ssim, "Skip the held-out SSIM");
+  cmd->add_option("--band-rows", args->options.band_rows,
+                  "Rows read and fitted at a time (0 = as many as fit in about 256 MiB); the "
+                  "scores do not depend on it")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   add_robust_flags(cmd, &args->options.robust);
   cmd->callback([args] { run_compare(*args); });
 }

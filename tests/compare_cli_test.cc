@@ -3,6 +3,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -81,6 +82,54 @@ TEST(CompareLibrary, FoldsAndTruthGiveSaneNumbers) {
   // both axes (it cannot be faster).
   EXPECT_TRUE(ls.pareto);
   EXPECT_TRUE(robust.pareto);  // more accurate than ls
+}
+
+// The capture is streamed in bands of rows; bands of 7 rows (fewer than the SSIM window's 11,
+// and not dividing the height) give the scores of one band over the whole capture. Sums are
+// added in another order, so equal to double rounding; counts and the median exactly.
+TEST(CompareLibrary, BandsGiveTheScoresOfTheWholeCapture) {
+  ScratchDir dir;
+  synth::SynthOptions so = synth::preset_options("default");
+  so.width = 24;
+  so.height = 45;
+  so.lights = "dome49";
+  const fs::path lp = synth::render_capture(so, dir / "cap").lp_file;
+  CompareOptions o;
+  o.solvers = {Solver::kLS, Solver::kRobust};
+  o.folds = 3;
+  o.threads = 2;
+  const CompareReport whole = compare_solvers(lp, std::nullopt, o);
+  o.band_rows = 7;
+  const CompareReport banded = compare_solvers(lp, std::nullopt, o);
+  // A test set too: the held-out scores come from the capture's whole fit.
+  const fs::path test_lp = synth::render_capture(so, dir / "test").lp_file;
+  o.band_rows = 0;
+  const CompareReport whole_test = compare_solvers(lp, test_lp, o);
+  o.band_rows = 7;
+  const CompareReport banded_test = compare_solvers(lp, test_lp, o);
+  constexpr double kSumReordering = 1e-9;  // relative: sums of about 1e5 terms in another order
+  for (const auto& [a, b] : {std::pair{&whole, &banded}, std::pair{&whole_test, &banded_test}}) {
+    ASSERT_EQ(a->results.size(), b->results.size());
+    for (std::size_t k = 0; k < a->results.size(); ++k) {
+      const SolverResult& x = a->results[k];
+      const SolverResult& y = b->results[k];
+      SCOPED_TRACE(std::string(fit::to_string(x.solver)));
+      EXPECT_EQ(x.heldout_samples, y.heldout_samples);
+      EXPECT_NEAR(x.heldout_psnr_db, y.heldout_psnr_db, kSumReordering * x.heldout_psnr_db);
+      EXPECT_NEAR(x.heldout_ssim, y.heldout_ssim, kSumReordering);
+      EXPECT_NEAR(x.truth_psnr_db, y.truth_psnr_db, kSumReordering * x.truth_psnr_db);
+      EXPECT_EQ(x.normals.texels, y.normals.texels);
+      EXPECT_NEAR(x.normals.mean_deg, y.normals.mean_deg, kSumReordering * x.normals.mean_deg);
+      EXPECT_EQ(x.normals.median_deg, y.normals.median_deg);
+      EXPECT_EQ(x.outliers.labelled, y.outliers.labelled);
+      EXPECT_EQ(x.outliers.true_outliers, y.outliers.true_outliers);
+      EXPECT_EQ(x.outliers.precision, y.outliers.precision);
+      EXPECT_EQ(x.shadow_fraction, y.shadow_fraction);
+      EXPECT_EQ(x.highlight_fraction, y.highlight_fraction);
+    }
+  }
+  EXPECT_GT(banded.results[1].outliers.labelled, 0u);
+  EXPECT_GT(banded.results[0].heldout_ssim, 0.0);
 }
 
 TEST(CompareCli, WritesTableCsvJsonAndPlotWithATestSet) {

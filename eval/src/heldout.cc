@@ -12,6 +12,12 @@ namespace ptmkit::eval {
 
 void HeldOutScore::add(const CoefficientMap& fit, const Eigen::Vector3d& dir, const Image& observed,
                        bool integer_range, bool with_ssim) {
+  add_rows(fit, dir, observed, integer_range, with_ssim, 0, fit.height);
+}
+
+void HeldOutScore::add_rows(const CoefficientMap& fit, const Eigen::Vector3d& dir,
+                            const Image& observed, bool integer_range, bool with_ssim,
+                            int first_row, int last_row) {
   const int w = fit.width;
   const int h = fit.height;
   if (observed.width() != w || observed.height() != h) {
@@ -36,9 +42,11 @@ void HeldOutScore::add(const CoefficientMap& fit, const Eigen::Vector3d& dir, co
         if (integer_range) p[c] = std::min(p[c], 1.0);
         o[c] = observed.at(x, y, std::min(c, observed.channels() - 1));
       }
-      for (int c = 0; c < ch; ++c) {
-        sum_sq_ += (p[c] - o[c]) * (p[c] - o[c]);
-        ++samples_;
+      if (y >= first_row && y < last_row) {
+        for (int c = 0; c < ch; ++c) {
+          sum_sq_ += (p[c] - o[c]) * (p[c] - o[c]);
+          ++samples_;
+        }
       }
       if (with_ssim) {
         const auto i = static_cast<std::size_t>(y) * w + x;
@@ -48,8 +56,9 @@ void HeldOutScore::add(const CoefficientMap& fit, const Eigen::Vector3d& dir, co
     }
   }
   if (with_ssim) {
-    ssim_sum_ += eval::mean_ssim(pl, ol, w, h);
-    ++ssim_images_;
+    ssim_sum_ += eval::ssim_sum(pl, ol, w, h, first_row, last_row);
+    ssim_pixels_ +=
+        static_cast<std::uint64_t>(last_row - first_row) * static_cast<std::uint64_t>(w);
   }
 }
 
@@ -58,6 +67,8 @@ double HeldOutScore::psnr_db() const {
   return ptmkit::psnr_db(sum_sq_ / static_cast<double>(samples_));
 }
 
-double HeldOutScore::mean_ssim() const { return ssim_images_ > 0 ? ssim_sum_ / ssim_images_ : 0.0; }
+double HeldOutScore::mean_ssim() const {
+  return ssim_pixels_ > 0 ? ssim_sum_ / static_cast<double>(ssim_pixels_) : 0.0;
+}
 
 }  // namespace ptmkit::eval

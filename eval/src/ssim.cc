@@ -45,6 +45,11 @@ std::vector<double> blur(const std::vector<double>& in, int w, int h) {
 }  // namespace
 
 double mean_ssim(const std::vector<double>& a, const std::vector<double>& b, int w, int h) {
+  return a.empty() ? 0.0 : ssim_sum(a, b, w, h, 0, h) / static_cast<double>(a.size());
+}
+
+double ssim_sum(const std::vector<double>& a, const std::vector<double>& b, int w, int h,
+                int first_row, int last_row) {
   constexpr double kC1 = 0.01 * 0.01;
   constexpr double kC2 = 0.03 * 0.03;
   std::vector<double> aa(a.size()), bb(a.size()), ab(a.size());
@@ -56,14 +61,16 @@ double mean_ssim(const std::vector<double>& a, const std::vector<double>& b, int
   const auto ma = blur(a, w, h), mb = blur(b, w, h);
   const auto saa = blur(aa, w, h), sbb = blur(bb, w, h), sab = blur(ab, w, h);
   double sum = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
+  const std::size_t end = static_cast<std::size_t>(last_row) * static_cast<std::size_t>(w);
+  for (std::size_t i = static_cast<std::size_t>(first_row) * static_cast<std::size_t>(w); i < end;
+       ++i) {
     const double va = saa[i] - ma[i] * ma[i];
     const double vb = sbb[i] - mb[i] * mb[i];
     const double cov = sab[i] - ma[i] * mb[i];
     sum += ((2 * ma[i] * mb[i] + kC1) * (2 * cov + kC2)) /
            ((ma[i] * ma[i] + mb[i] * mb[i] + kC1) * (va + vb + kC2));
   }
-  return a.empty() ? 0.0 : sum / static_cast<double>(a.size());
+  return sum;
 }
 
 }  // namespace ptmkit::eval

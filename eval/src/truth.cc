@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
+#include <vector>
 
 #include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
@@ -59,9 +61,36 @@ TruthPsnr psnr_against_truth(const CoefficientMap& fit,
       }
     }
   }
+  out.sum_sq = sum;
   const double mse = out.samples > 0 ? sum / static_cast<double>(out.samples) : 0.0;
   out.psnr_db = psnr_db(mse);
   return out;
+}
+
+void TruthPsnr::add(const TruthPsnr& band) {
+  sum_sq += band.sum_sq;
+  samples += band.samples;
+  psnr_db = ptmkit::psnr_db(samples > 0 ? sum_sq / static_cast<double>(samples) : 0.0);
+}
+
+namespace {
+
+void finish(OutlierScores* s) {
+  s->precision =
+      s->labelled > 0 ? static_cast<double>(s->hits) / static_cast<double>(s->labelled) : 1.0;
+  s->recall = s->true_outliers > 0
+                  ? static_cast<double>(s->hits) / static_cast<double>(s->true_outliers)
+                  : 1.0;
+}
+
+}  // namespace
+
+void OutlierScores::add(const OutlierScores& band) {
+  true_outliers += band.true_outliers;
+  labelled += band.labelled;
+  samples += band.samples;
+  hits += band.hits;
+  finish(this);
 }
 
 OutlierScores outlier_scores(const std::vector<std::uint8_t>& labels,
@@ -78,7 +107,6 @@ OutlierScores outlier_scores(const std::vector<std::uint8_t>& labels,
     throw Error("evaluate: the label dump does not match the image size and light count");
   }
   OutlierScores s;
-  std::uint64_t hit = 0;
   for (std::size_t i = 0; i < n; ++i) {
     require_same_size(observed[i], w, h, "an observed image");
     require_same_size(diffuse[i], w, h, "a diffuse truth image");
@@ -92,23 +120,20 @@ OutlierScores outlier_scores(const std::vector<std::uint8_t>& labels,
         const bool flagged = labels[(static_cast<std::size_t>(y) * w + x) * n + i] != 0;
         s.true_outliers += truth ? 1 : 0;
         s.labelled += flagged ? 1 : 0;
-        hit += truth && flagged ? 1 : 0;
+        s.hits += truth && flagged ? 1 : 0;
       }
     }
   }
-  s.precision = s.labelled > 0 ? static_cast<double>(hit) / static_cast<double>(s.labelled) : 1.0;
-  s.recall =
-      s.true_outliers > 0 ? static_cast<double>(hit) / static_cast<double>(s.true_outliers) : 1.0;
+  finish(&s);
   return s;
 }
 
-NormalError normal_error(const Image& estimated, const Image& truth, const Image* mask) {
+void append_normal_angles(const Image& estimated, const Image& truth, const Image* mask,
+                          std::vector<double>* angles_deg) {
   require_same_size(estimated, truth.width(), truth.height(), "the estimated normal map");
   if (estimated.channels() < 3 || truth.channels() < 3)
     throw Error("evaluate: normal maps need 3 channels");
   if (mask != nullptr) require_same_size(*mask, truth.width(), truth.height(), "the mask");
-  std::vector<double> angles;
-  double sum = 0.0;
   for (int y = 0; y < truth.height(); ++y) {
     for (int x = 0; x < truth.width(); ++x) {
       if (mask != nullptr && !(mask->at(x, y, 0) > 0.5f)) continue;
@@ -116,19 +141,28 @@ NormalError normal_error(const Image& estimated, const Image& truth, const Image
       Eigen::Vector3d b(truth.at(x, y, 0), truth.at(x, y, 1), truth.at(x, y, 2));
       if (a.norm() < 1e-12 || b.norm() < 1e-12) continue;
       const double c = std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0);
-      const double deg = std::acos(c) * 180.0 / M_PI;
-      angles.push_back(deg);
-      sum += deg;
+      angles_deg->push_back(std::acos(c) * 180.0 / M_PI);
     }
   }
+}
+
+NormalError normal_error_of(std::vector<double> angles) {
   NormalError e;
   e.texels = angles.size();
   if (angles.empty()) return e;
+  double sum = 0.0;
+  for (double a : angles) sum += a;
   e.mean_deg = sum / static_cast<double>(angles.size());
   const auto mid = angles.begin() + static_cast<std::ptrdiff_t>(angles.size() / 2);
   std::nth_element(angles.begin(), mid, angles.end());
   e.median_deg = *mid;
   return e;
+}
+
+NormalError normal_error(const Image& estimated, const Image& truth, const Image* mask) {
+  std::vector<double> angles;
+  append_normal_angles(estimated, truth, mask, &angles);
+  return normal_error_of(std::move(angles));
 }
 
 }  // namespace ptmkit::eval

@@ -47,6 +47,10 @@ struct CompareOptions {
   bool ssim = true;
   fit::RobustOptions robust;
   fit::DesignOptions design;
+  // Rows of the capture read and fitted at a time; 0: as many as fit in about 256 MiB of
+  // samples over every stack read together (capture, test set, diffuse truth), at least 16.
+  // The scores do not depend on it beyond rounding (SSIM windows reach across bands).
+  int band_rows = 0;
 
   [[nodiscard]] std::string validate() const;  // empty if valid
 };
@@ -103,7 +107,8 @@ struct CompareReport {
 
 // Runs the comparison. Throws ptmkit::Error naming the file on an unreadable or mismatched
 // input (a light file, an image, a truth file), on invalid options, or when a fold's training
-// lights cannot be fitted. Reads every image into memory (capture, test set and truth).
+// lights cannot be fitted. Streams the images band by band, like a fit (options.band_rows),
+// keeping besides the bands only the true normals' angles (8 bytes a texel, for their median).
 [[nodiscard]] CompareReport compare_solvers(const std::filesystem::path& capture_lp,
                                             const std::optional<std::filesystem::path>& test_lp,
                                             const CompareOptions& options);

@@ -12,4 +12,10 @@ namespace ptmkit::eval {
 [[nodiscard]] double mean_ssim(const std::vector<double>& a, const std::vector<double>& b, int w,
                                int h);
 
+// The SSIM map of a and b (w x h) summed over rows [first_row, last_row). A band of a larger
+// image scores exactly as the whole image would when it carries the 5 rows of the window's
+// radius above and below the rows scored (fewer only at the image's own top and bottom).
+[[nodiscard]] double ssim_sum(const std::vector<double>& a, const std::vector<double>& b, int w,
+                              int h, int first_row, int last_row);
+
 }  // namespace ptmkit::eval

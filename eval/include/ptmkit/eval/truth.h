@@ -24,6 +24,9 @@ struct TruthPsnr {
   // clamped.
   double psnr_db = 0.0;
   std::uint64_t samples = 0;  // lit samples x channels
+  double sum_sq = 0.0;        // the squared differences summed
+  // Adds another band's sums (a capture scored band by band) and recomputes psnr_db.
+  void add(const TruthPsnr& band);
 };
 // `diffuse[i]` is the diffuse truth under light_dirs[i]; `normals` the true normals (3 ch).
 [[nodiscard]] TruthPsnr psnr_against_truth(const CoefficientMap& fit,
@@ -39,6 +42,9 @@ struct OutlierScores {
   std::uint64_t true_outliers = 0;
   std::uint64_t labelled = 0;
   std::uint64_t samples = 0;
+  std::uint64_t hits = 0;  // labelled and true
+  // Adds another band's counts and recomputes precision and recall.
+  void add(const OutlierScores& band);
 };
 // labels: [y][x][light] as FitOutputs::labels.
 [[nodiscard]] OutlierScores outlier_scores(const std::vector<std::uint8_t>& labels,
@@ -57,5 +63,10 @@ struct NormalError {
 // (optional, first channel > 0.5) is set.
 [[nodiscard]] NormalError normal_error(const Image& estimated, const Image& truth,
                                        const Image* mask = nullptr);
+// The angles behind normal_error, in degrees, texel by texel (row-major, masked and zero
+// normals skipped), to be gathered over bands; normal_error_of gives their mean and median.
+void append_normal_angles(const Image& estimated, const Image& truth, const Image* mask,
+                          std::vector<double>* angles_deg);
+[[nodiscard]] NormalError normal_error_of(std::vector<double> angles_deg);
 
 }  // namespace ptmkit::eval
