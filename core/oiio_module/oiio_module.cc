@@ -39,6 +39,11 @@ OIIO::TypeDesc type_of(int format) {
 }
 
 void* open_file(const char* path, PtmkitOiioHeader* header, char* err, std::size_t err_len) {
+  // Only the reader the extension names: JPEG, PNG and TIFF are recognised by their bytes
+  // before this module is asked, and letting OpenImageIO try every reader on an unknown file
+  // hands it to each plugin's prober (ffmpeg's among them): seconds for a 24-byte file.
+  static const bool extension_only = OIIO::attribute("try_all_readers", 0);
+  (void)extension_only;
   // Camera raw: LibRaw's linear output (sRGB primaries, no transfer curve), 16 bits; a fit
   // wants values proportional to the light.
   OIIO::ImageSpec config;
