@@ -7,6 +7,9 @@
 # Usage: [RUNS=N] [SETTLE=S] [NOISE=SIGMA] scripts/bench-fit.sh [WORK_DIR] [THREADS]
 #   (default: /tmp/ptmkit-bench, 2 threads, 3 runs, sensor noise 3 grey levels)
 # PTMKIT_BUILD=DIR uses an existing build instead of building build/release.
+# PTMKIT_BASELINE=DIR also runs another build's ptmkit (DIR/apps/ptmkit, e.g. an earlier
+# version) in every round, to a new file, and prints its medians, this build's time as a
+# fraction of its, and whether the two wrote the same bytes.
 # NOISE is the rendered sensor noise (sigma, grey levels). Decoding cost follows the JPEGs'
 # size: at 3 they are 1.9 bits a pixel, at 1 (the synthetic preset's own) 0.9, against 2.3
 # for the real photographs in ../shared/data; and a real quality-95 stack of this size
@@ -40,7 +43,8 @@ fi
 # runs.
 runs="${RUNS:-3}"
 settle="${SETTLE:-0}"
-kinds="floor decode lrgb rgb lrgb-replace rgb-replace"
+kinds="floor decode lrgb rgb lrgb-replace rgb-replace base-lrgb base-rgb"
+baseline="${PTMKIT_BASELINE:-}"
 for kind in $kinds; do rm -f "$work/$kind.times"; done
 run_once() {  # run_once TIMES_FILE COMMAND...: appends "wall_s max_rss_kib"
   local out="$1"
@@ -70,6 +74,11 @@ for _ in $(seq "$runs"); do
       run_once "$work/$kind.times" "$ptmkit" fit "$stack/lights.lp" -o "$work/out-$fmt.ptm" \
         --format "$fmt" --threads "$threads"
     done
+    if [ -n "$baseline" ]; then
+      rm -f "$work/base-$fmt.ptm"
+      run_once "$work/base-$fmt.times" "$baseline/apps/ptmkit" fit "$stack/lights.lp" \
+        -o "$work/base-$fmt.ptm" --format "$fmt" --threads "$threads"
+    fi
   done
 done
 read -r floor_s floor_lo floor_hi floor_mib < <(summary "$work/floor.times")
@@ -87,3 +96,14 @@ for kind in lrgb rgb lrgb-replace rgb-replace; do
   printf 'ptmkit fit --format %-4s (%s): %s s (%s-%s; %sx decode, %sx floor), peak %s MiB (%s of decoded stack)\n' \
     "${kind%-replace}" "$what" "$fit_s" "$fit_lo" "$fit_hi" "$ratio" "$fratio" "$fit_mib" "$frac"
 done
+if [ -n "$baseline" ]; then
+  for fmt in lrgb rgb; do
+    read -r fit_s _ _ _ < <(summary "$work/$fmt.times")
+    read -r base_s base_lo base_hi base_mib < <(summary "$work/base-$fmt.times")
+    same="different bytes"
+    cmp -s "$work/out-$fmt.ptm" "$work/base-$fmt.ptm" && same="the same bytes"
+    printf 'baseline fit --format %-4s (new file): %s s (%s-%s), peak %s MiB; this build %s of it; %s\n' \
+      "$fmt" "$base_s" "$base_lo" "$base_hi" "$base_mib" \
+      "$(awk "BEGIN{printf \"%.2fx\", $fit_s/$base_s}")" "$same"
+  done
+fi
