@@ -323,6 +323,18 @@ TEST(ImageDecode, DeclaredSizeIsBoundedBeforeDecoding) {
   } catch (const Error& e) {
     EXPECT_THAT(e.what(), HasSubstr("cannot hold"));
   }
+  // A text chunk declaring 1.6 GB in a small PNG (libpng would allocate it before reading).
+  write_image(dir / "small.png", pattern(8, 8, 3).view());
+  std::string png = slurp(dir / "small.png");
+  const std::size_t after_ihdr = 8 + 8 + 13 + 4;
+  png.insert(after_ihdr, std::string("\x63\x68\x6C\x69tEXtkey\0value", 20));
+  spit(dir / "text.png", png);
+  try {
+    (void)probe_image(dir / "text.png");
+    FAIL() << "a 1.6 GB text chunk in a small PNG was accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("tEXt chunk declares 1667787881 bytes"));
+  }
   // Not a regular file: refused before reading.
   EXPECT_THROW((void)probe_image("/dev/zero"), Error);
 }

@@ -8,6 +8,7 @@
 
 #include <map>
 
+#include "ptmkit/core/image_io.h"
 #include "reliability_util.h"
 #include "test_util.h"
 
@@ -234,6 +235,26 @@ TEST(ReliabilityOutputs, RelightOutDirFailingPartwayRestoresEarlierResults) {
   EXPECT_NE(r2.exit_code, 0);
   EXPECT_EQ(snapshot(out), before2);
   EXPECT_TRUE(test::temporaries(dir.path()).empty());
+}
+
+// A mask caught among the photographs by a shell pattern (`chrome.*.png` takes
+// `chrome.mask.png` too) is named as the problem, with what to do, before any search.
+TEST(ReliabilityCli, CalibrationNamesAMaskGivenAsAPhotograph) {
+  test::ScratchDir dir;
+  Image photo(64, 48, 3, ColourSpace::kSRGB, 0.2f);
+  Image mask(64, 48, 1, ColourSpace::kSRGB, 0.0f);
+  for (int y = 10; y < 30; ++y)
+    for (int x = 20; x < 40; ++x) mask.at(x, y, 0) = 1.0f;
+  write_image(dir / "ball.0.png", photo.view());
+  write_image(dir / "ball.1.png", photo.view());
+  write_image(dir / "ball.mask.png", mask.view());
+  const test::RunResult r = test::run_ptmkit(
+      {"calibrate", "sphere", (dir / "ball.0.png").string(), (dir / "ball.1.png").string(),
+       (dir / "ball.mask.png").string(), "-o", (dir / "lights.lp").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("ball.mask.png: a mask"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--mask"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "lights.lp"));
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // PNG through libpng: palettes and sub-byte grey expanded to 8 bits, transparency to an alpha
 // channel, 16-bit samples in the machine's byte order (as OpenImageIO's PNG reader gives them).
 #include <csetjmp>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -48,6 +49,7 @@ class PngDecoder final : public Decoder {
   PngDecoder& operator=(const PngDecoder&) = delete;
 
   void open(std::uintmax_t file_bytes) {
+    check_chunk_lengths(file_bytes);
     file_ = std::fopen(path_.c_str(), "rb");
     if (file_ == nullptr) throw Error(where(path_) + ": cannot open image file");
     png_ = png_create_read_struct(PNG_LIBPNG_VER_STRING, &messages_, on_error, on_warning);
@@ -61,6 +63,8 @@ class PngDecoder final : public Decoder {
     // libpng's own limits are tighter than ours for width; ours bound both.
     png_set_user_limits(png_, static_cast<png_uint_32>(kMaxImageSidePx),
                         static_cast<png_uint_32>(kMaxImageSidePx));
+    // Decompressed ancillary chunks (zTXt, iTXt, iCCP) need no more than 16 MiB.
+    png_set_chunk_malloc_max(png_, static_cast<png_alloc_size_t>(16u << 20));
     if (!read_info()) fail("not a readable PNG");
     const png_uint_32 w = png_get_image_width(png_, info_);
     const png_uint_32 h = png_get_image_height(png_, info_);
@@ -131,6 +135,35 @@ class PngDecoder final : public Decoder {
         std::strstr(messages_.warning, "CRC")) {
       damaged_data(path_, settings_, messages_.warning, &warned_);
     }
+  }
+
+  // libpng allocates (and clears) an ancillary chunk - text, an ICC profile - at the length
+  // its header declares before reading it: a 339-byte file declaring a 1.6 GB tEXt chunk cost
+  // 1.6 GB. Every chunk before the image data is walked first and must lie inside the file.
+  // The image data (IDAT) is streamed, so a cut-short file still reaches libpng, which
+  // reports it as damaged.
+  void check_chunk_lengths(std::uintmax_t file_bytes) const {
+    std::FILE* f = std::fopen(path_.c_str(), "rb");
+    if (f == nullptr) throw Error(where(path_) + ": cannot open image file");
+    std::uintmax_t pos = 8;
+    std::string problem;
+    while (pos + 8 <= file_bytes && std::fseek(f, static_cast<long>(pos), SEEK_SET) == 0) {
+      unsigned char h[8];
+      if (std::fread(h, 1, 8, f) != 8) break;
+      const std::uint32_t length = static_cast<std::uint32_t>(h[0]) << 24 |
+                                   static_cast<std::uint32_t>(h[1]) << 16 |
+                                   static_cast<std::uint32_t>(h[2]) << 8 | h[3];
+      const std::string type(reinterpret_cast<const char*>(h + 4), 4);
+      if (type == "IDAT" || type == "IEND") break;
+      if (length > file_bytes - pos - 8 || file_bytes - pos - 8 - length < 4) {
+        problem = "its " + excerpt(type) + " chunk declares " + std::to_string(length) +
+                  " bytes but the file has " + std::to_string(file_bytes - pos - 8) + " left";
+        break;
+      }
+      pos += 12 + static_cast<std::uintmax_t>(length);
+    }
+    std::fclose(f);
+    if (!problem.empty()) throw Error(where(path_) + ": not a readable PNG: " + problem);
   }
 
  private:
