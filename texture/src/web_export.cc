@@ -1,33 +1,37 @@
-// Export to the relight/OpenLIME web folder (texture/web_export.h).
+// Export to the relight/OpenLIME web folder (texture/web_export.h): the names, and the folder
+// (checks, plane files or deep-zoom pyramids, normals, info.json) built aside and renamed in.
 #include "ptmkit/texture/web_export.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-// clang-format off
-#include <cstdio>  // jpeglib.h needs FILE and size_t declared first
-#include <jpeglib.h>
-// clang-format on
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <csetjmp>
 #include <cstdint>
 #include <fstream>
-#include <functional>
-#include <limits>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
 
 #include "ptmkit/core/atomic_file.h"
-#include "ptmkit/core/colour.h"
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
+#include "web_export_detail.h"
 
 namespace fs = std::filesystem;
 
 namespace ptmkit::texture {
+
+using internal::decode_jpeg;
+using internal::encode_jpeg;
+using internal::half;
+using internal::hsh_planes_of;
+using internal::Level;
+using internal::plane_ranges;
+using internal::planes_of;
+using internal::PlaneSource;
+using internal::quantise_region;
+using internal::Quantiser;
 
 std::string to_string(WebLayout layout) {
   return layout == WebLayout::kDeepZoom ? "deepzoom" : "image";
@@ -78,244 +82,6 @@ std::string WebExportReport::brief() const {
 }
 
 namespace {
-
-// The one place the texture maps are read: what a map is in the web format's terms, and a
-// function that fills one row of texels with every plane's coefficient (normalised units).
-struct PlaneSource {
-  std::string type;        // "ptm" or "hsh"
-  std::string colorspace;  // "rgb" or "lrgb"
-  int width = 0, height = 0;
-  int planes = 0;
-  // Planes holding a colour in 0..1, written with scale 1 and bias 0 (lrgb's plane_0).
-  int fixed_unit_planes = 0;
-  // out: width * planes floats, [x][plane].
-  std::function<void(int y, float* out)> fill_row;
-};
-
-// The web order of the PTM terms (1, u, v, u^2, uv, v^2) as indices into the .ptm's a0..a5
-// (u^2, v^2, uv, u, v, 1).
-constexpr std::array<int, kPtmTerms> kWebFromPtm = {5, 3, 4, 0, 2, 1};
-
-PlaneSource planes_of(const CoefficientMap& map) {
-  PlaneSource s;
-  s.type = "ptm";
-  s.width = map.width;
-  s.height = map.height;
-  const std::size_t texels = static_cast<std::size_t>(map.width) * map.height;
-  if (map.width <= 0 || map.height <= 0 ||
-      map.coeffs.size() != texels * map.polynomials() * kPtmTerms ||
-      map.colour.size() != texels * map.colours()) {
-    throw Error("web export: the coefficient map is empty or its buffers do not match its size");
-  }
-  switch (map.model) {
-    case ColourModel::kRGB:
-      s.colorspace = "rgb";
-      s.planes = 18;
-      s.fill_row = [&map](int y, float* out) {
-        for (int x = 0; x < map.width; ++x, out += 18) {
-          const float* a = map.texel_coeffs(x, y);
-          for (int j = 0; j < kPtmTerms; ++j) {
-            for (int c = 0; c < 3; ++c) out[3 * j + c] = a[c * kPtmTerms + kWebFromPtm[j]];
-          }
-        }
-      };
-      break;
-    case ColourModel::kLRGB:
-      s.colorspace = "lrgb";
-      s.planes = 9;
-      s.fixed_unit_planes = 3;
-      s.fill_row = [&map](int y, float* out) {
-        for (int x = 0; x < map.width; ++x, out += 9) {
-          const float* a = map.texel_coeffs(x, y);
-          const float* col = map.texel_colour(x, y);
-          for (int c = 0; c < 3; ++c) out[c] = col[c];
-          for (int j = 0; j < kPtmTerms; ++j) out[3 + j] = a[kWebFromPtm[j]];
-        }
-      };
-      break;
-    case ColourModel::kYCC:
-      // rgb = from_ycbcr(Y(l), cb, cr) is linear in (Y, cb, cr): each channel is a polynomial
-      // whose terms are from_ycbcr of (a_k, 0, 0), the constant term's of (a5, cb, cr).
-      s.colorspace = "rgb";
-      s.planes = 18;
-      s.fill_row = [&map](int y, float* out) {
-        for (int x = 0; x < map.width; ++x, out += 18) {
-          const float* a = map.texel_coeffs(x, y);
-          const float* col = map.texel_colour(x, y);
-          for (int j = 0; j < kPtmTerms; ++j) {
-            const int k = kWebFromPtm[j];
-            const bool constant = k == 5;
-            double rgb[3];
-            from_ycbcr({a[k], constant ? col[0] : 0.0, constant ? col[1] : 0.0}, &rgb[0], &rgb[1],
-                       &rgb[2]);
-            for (int c = 0; c < 3; ++c) out[3 * j + c] = static_cast<float>(rgb[c]);
-          }
-        }
-      };
-      break;
-  }
-  return s;
-}
-
-// An HSH map (the rgb layout .rti holds).
-PlaneSource hsh_planes_of(const CoefficientMap& map) {
-  PlaneSource s;
-  s.type = "hsh";
-  s.colorspace = "rgb";
-  s.width = map.width;
-  s.height = map.height;
-  const int t = map.terms();
-  if (map.model != ColourModel::kRGB) {
-    throw Error("web export: an HSH map is exported in the rgb layout, not " +
-                std::string(to_string(map.model)));
-  }
-  if (map.width <= 0 || map.height <= 0 ||
-      map.coeffs.size() != map.texels() * 3 * static_cast<std::size_t>(t)) {
-    throw Error("web export: the HSH map is empty or its buffer does not match its size");
-  }
-  s.planes = 3 * t;
-  s.fill_row = [&map, t](int y, float* out) {
-    for (int x = 0; x < map.width; ++x, out += 3 * t) {
-      const float* c = map.texel_coeffs(x, y);
-      for (int j = 0; j < t; ++j) {
-        for (int k = 0; k < 3; ++k) out[3 * j + k] = c[k * t + j];
-      }
-    }
-  };
-  return s;
-}
-
-// Per-plane range over every texel (exact minimum and maximum, see docs/WEB.md for why not a
-// quantile); throws on a non-finite coefficient.
-void plane_ranges(const PlaneSource& src, std::vector<double>* lo, std::vector<double>* hi) {
-  const int p = src.planes;
-  std::vector<std::vector<double>> row_lo(src.height), row_hi(src.height);
-  std::vector<int> bad_row(src.height, -1);
-  tbb::parallel_for(tbb::blocked_range<int>(0, src.height), [&](const tbb::blocked_range<int>& r) {
-    std::vector<float> buf(static_cast<std::size_t>(src.width) * p);
-    for (int y = r.begin(); y < r.end(); ++y) {
-      src.fill_row(y, buf.data());
-      std::vector<double> l(p, std::numeric_limits<double>::infinity());
-      std::vector<double> h(p, -std::numeric_limits<double>::infinity());
-      for (int x = 0; x < src.width; ++x) {
-        for (int k = 0; k < p; ++k) {
-          const float v = buf[static_cast<std::size_t>(x) * p + k];
-          if (!std::isfinite(v)) {
-            bad_row[y] = x;
-            break;
-          }
-          l[k] = std::min(l[k], static_cast<double>(v));
-          h[k] = std::max(h[k], static_cast<double>(v));
-        }
-      }
-      row_lo[y] = std::move(l);
-      row_hi[y] = std::move(h);
-    }
-  });
-  lo->assign(p, std::numeric_limits<double>::infinity());
-  hi->assign(p, -std::numeric_limits<double>::infinity());
-  for (int y = 0; y < src.height; ++y) {
-    if (bad_row[y] >= 0) {
-      throw Error("web export: texel (" + std::to_string(bad_row[y]) + ", " + std::to_string(y) +
-                  ") has a non-finite coefficient");
-    }
-    for (int k = 0; k < p; ++k) {
-      (*lo)[k] = std::min((*lo)[k], row_lo[y][k]);
-      (*hi)[k] = std::max((*hi)[k], row_hi[y][k]);
-    }
-  }
-}
-
-// --- JPEG through libjpeg ---------------------------------------------------------------
-
-struct JpegErrorManager {
-  jpeg_error_mgr pub;
-  std::jmp_buf jump;
-  char message[JMSG_LENGTH_MAX];
-};
-
-void jpeg_error_exit(j_common_ptr cinfo) {
-  auto* err = reinterpret_cast<JpegErrorManager*>(cinfo->err);
-  (*cinfo->err->format_message)(cinfo, err->message);
-  std::longjmp(err->jump, 1);
-}
-
-// Encodes interleaved 8-bit RGB. `ycbcr`: the ordinary colour transform; otherwise the
-// components are stored as R, G, B (Adobe marker, no transform). No chroma subsampling.
-std::vector<unsigned char> encode_jpeg(const unsigned char* rgb, int width, int height, int quality,
-                                       bool ycbcr) {
-  jpeg_compress_struct cinfo{};
-  JpegErrorManager err{};
-  cinfo.err = jpeg_std_error(&err.pub);
-  err.pub.error_exit = jpeg_error_exit;
-  unsigned char* mem = nullptr;
-  unsigned long mem_size = 0;  // NOLINT(runtime/int): libjpeg's type
-  if (setjmp(err.jump)) {
-    jpeg_destroy_compress(&cinfo);
-    std::free(mem);
-    throw Error(std::string("JPEG encoding failed: ") + err.message);
-  }
-  jpeg_create_compress(&cinfo);
-  jpeg_mem_dest(&cinfo, &mem, &mem_size);
-  cinfo.image_width = static_cast<JDIMENSION>(width);
-  cinfo.image_height = static_cast<JDIMENSION>(height);
-  cinfo.input_components = 3;
-  cinfo.in_color_space = JCS_RGB;
-  jpeg_set_defaults(&cinfo);
-  jpeg_set_colorspace(&cinfo, ycbcr ? JCS_YCbCr : JCS_RGB);
-  for (int c = 0; c < 3; ++c) {
-    cinfo.comp_info[c].h_samp_factor = 1;
-    cinfo.comp_info[c].v_samp_factor = 1;
-  }
-  jpeg_set_quality(&cinfo, quality, TRUE);
-  cinfo.optimize_coding = TRUE;
-  cinfo.dct_method = JDCT_ISLOW;
-  jpeg_start_compress(&cinfo, TRUE);
-  const std::size_t stride = static_cast<std::size_t>(width) * 3;
-  while (cinfo.next_scanline < cinfo.image_height) {
-    JSAMPROW row = const_cast<JSAMPROW>(rgb + cinfo.next_scanline * stride);
-    jpeg_write_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_compress(&cinfo);
-  jpeg_destroy_compress(&cinfo);
-  std::vector<unsigned char> out(mem, mem + mem_size);
-  std::free(mem);
-  return out;
-}
-
-// Decodes to interleaved RGB (for measuring what the coding lost).
-std::vector<unsigned char> decode_jpeg(const std::vector<unsigned char>& data, int width,
-                                       int height) {
-  jpeg_decompress_struct cinfo{};
-  JpegErrorManager err{};
-  // Declared before setjmp: a longjmp back here must not skip an object's construction.
-  std::vector<unsigned char> out;
-  cinfo.err = jpeg_std_error(&err.pub);
-  err.pub.error_exit = jpeg_error_exit;
-  if (setjmp(err.jump)) {
-    jpeg_destroy_decompress(&cinfo);
-    throw Error(std::string("JPEG decoding failed: ") + err.message);
-  }
-  jpeg_create_decompress(&cinfo);
-  jpeg_mem_src(&cinfo, data.data(), static_cast<unsigned long>(data.size()));  // NOLINT
-  jpeg_read_header(&cinfo, TRUE);
-  cinfo.out_color_space = JCS_RGB;
-  cinfo.dct_method = JDCT_ISLOW;
-  jpeg_start_decompress(&cinfo);
-  if (static_cast<int>(cinfo.output_width) != width ||
-      static_cast<int>(cinfo.output_height) != height || cinfo.output_components != 3) {
-    jpeg_destroy_decompress(&cinfo);
-    throw Error("JPEG decoding: unexpected size");
-  }
-  out.resize(static_cast<std::size_t>(width) * height * 3);
-  while (cinfo.output_scanline < cinfo.output_height) {
-    JSAMPROW row = out.data() + static_cast<std::size_t>(cinfo.output_scanline) * width * 3;
-    jpeg_read_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_decompress(&cinfo);
-  jpeg_destroy_decompress(&cinfo);
-  return out;
-}
 
 // --- the folder ------------------------------------------------------------------------
 
@@ -393,53 +159,6 @@ struct Writer {
     bytes += data.size();
   }
 };
-
-// One JPEG's three planes at one pyramid level, floats [y][x][3].
-struct Level {
-  int width = 0, height = 0;
-  std::vector<float> v;
-};
-
-Level half(const Level& src) {
-  Level d;
-  d.width = src.width / 2;
-  d.height = src.height / 2;
-  d.v.resize(static_cast<std::size_t>(d.width) * d.height * 3);
-  tbb::parallel_for(tbb::blocked_range<int>(0, d.height), [&](const tbb::blocked_range<int>& r) {
-    for (int y = r.begin(); y < r.end(); ++y) {
-      const float* a = src.v.data() + static_cast<std::size_t>(2 * y) * src.width * 3;
-      const float* b = a + static_cast<std::size_t>(src.width) * 3;
-      float* o = d.v.data() + static_cast<std::size_t>(y) * d.width * 3;
-      for (int x = 0; x < d.width; ++x) {
-        for (int c = 0; c < 3; ++c) {
-          const std::size_t i = static_cast<std::size_t>(2 * x) * 3 + c;
-          o[3 * x + c] = 0.25f * (a[i] + a[i + 3] + b[i] + b[i + 3]);
-        }
-      }
-    }
-  });
-  return d;
-}
-
-// 8-bit plane value of a coefficient: round((v - min) / (max - min) * 255).
-struct Quantiser {
-  std::array<double, 3> lo{}, inv_range{};
-  [[nodiscard]] unsigned char byte(int c, float v) const {
-    const double q = (v - lo[c]) * inv_range[c] * 255.0;
-    return static_cast<unsigned char>(std::clamp(std::lround(q), 0L, 255L));
-  }
-};
-
-std::vector<unsigned char> quantise_region(const Level& l, const Quantiser& q, int x0, int y0,
-                                           int w, int h) {
-  std::vector<unsigned char> out(static_cast<std::size_t>(w) * h * 3);
-  for (int y = 0; y < h; ++y) {
-    const float* row = l.v.data() + (static_cast<std::size_t>(y0 + y) * l.width + x0) * 3;
-    unsigned char* o = out.data() + static_cast<std::size_t>(y) * w * 3;
-    for (int i = 0; i < w * 3; ++i) o[i] = q.byte(i % 3, row[i]);
-  }
-  return out;
-}
 
 std::string number_text(double v) {
   std::ostringstream s;
