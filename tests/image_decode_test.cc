@@ -327,7 +327,7 @@ TEST(ImageDecode, DeclaredSizeIsBoundedBeforeDecoding) {
   write_image(dir / "small.png", pattern(8, 8, 3).view());
   std::string png = slurp(dir / "small.png");
   const std::size_t after_ihdr = 8 + 8 + 13 + 4;
-  png.insert(after_ihdr, std::string("\x63\x68\x6C\x69tEXtkey\0value", 20));
+  png.insert(after_ihdr, std::string("\x63\x68\x6C\x69tEXtkey\0value", 17));
   spit(dir / "text.png", png);
   try {
     (void)probe_image(dir / "text.png");
