@@ -15,6 +15,7 @@
 #include "ptmkit/core/plane.h"
 #include "ptmkit/synth/board.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 
@@ -22,6 +23,26 @@ namespace ptmkit::calib {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+
+// Focal length within 0.5%: the requirement (docs/TARGETS.md). Measured 0.034% from 8 views
+// (k3 fixed), 0.038% (k3 free), 0.08% from 5 views on the command line.
+constexpr double kFocalTargetPercent = 0.5;
+// Principal point, 8 views: measured 0.54 px (cx) and 0.06 px (cy) off.
+constexpr double kPrincipalPointTolPx = 1.0;
+// Reprojection RMS with noise sigma 1 grey level: measured 0.083 px over 8 views, 0.069 px for
+// the tilted board's plane.
+constexpr double kReprojectionRmsTolPx = 0.2;
+// Reprojection RMS of any one of the 8 views: measured worst 0.139 px.
+constexpr double kViewRmsTolPx = 0.3;
+// The tilted board's tilt and normal: measured 0.000 and 0.0005 degrees off.
+constexpr double kPlaneAngleTolDeg = 0.2;
+// The plane's origin in the camera frame (560 mm away): measured 0.005 mm off.
+constexpr double kPlaneOriginTolMm = 1.0;
+// Corners mapped through the homography to board mm: measured worst 0.070 mm (0.19 px at
+// 0.37 mm/px).
+constexpr double kPlaneCornerTolMm = 0.1;
+// View 1's tilt from a 5-view command-line calibration: measured 0.012 degrees off.
+constexpr double kCliTiltTolDeg = 0.5;
 
 // The camera of these tests: f ~1500 px, mild barrel distortion, a little decentring.
 synth::PinholeCamera true_camera() {
@@ -83,16 +104,16 @@ TEST(CalibCamera, RecoversTheFocalLengthFromEightViews) {
       "%.4f p1 %.5f p2 %.5f; rms %.3f px over %d corners\n",
       c.fx, fx_err, c.fy, fy_err, c.cx, c.cy, c.k1, c.k2, c.p1, c.p2, report.rms_px,
       report.corners_used);
-  EXPECT_LT(std::abs(fx_err), 0.5);  // percent: the requirement (docs/TARGETS.md)
-  EXPECT_LT(std::abs(fy_err), 0.5);
-  EXPECT_NEAR(c.cx, truth.cx, 1.0);
-  EXPECT_NEAR(c.cy, truth.cy, 1.0);
-  EXPECT_LT(report.rms_px, 0.2);
+  EXPECT_LT(std::abs(fx_err), kFocalTargetPercent);
+  EXPECT_LT(std::abs(fy_err), kFocalTargetPercent);
+  EXPECT_NEAR(c.cx, truth.cx, kPrincipalPointTolPx);
+  EXPECT_NEAR(c.cy, truth.cy, kPrincipalPointTolPx);
+  EXPECT_LT(report.rms_px, kReprojectionRmsTolPx);
   EXPECT_EQ(c.k3, 0.0);
   for (const auto& v : report.views) {
     EXPECT_TRUE(v.used);
     EXPECT_EQ(v.tags_used, v.tags_detected);
-    EXPECT_LT(v.rms_px, 0.3);
+    EXPECT_LT(v.rms_px, kViewRmsTolPx);
   }
 }
 
@@ -108,8 +129,8 @@ TEST(CalibCamera, FreeK3GivesNoBetterFocalLength) {
   const double fy_err = 100.0 * (f.camera.fy - truth.fy) / truth.fy;
   std::printf("calibrate (k3 free): fx %+.3f%% fy %+.3f%% k1 %.4f k2 %.4f k3 %.4f rms %.3f px\n",
               fx_err, fy_err, f.camera.k1, f.camera.k2, f.camera.k3, f.rms_px);
-  EXPECT_LT(std::abs(fx_err), 0.5);
-  EXPECT_LT(std::abs(fy_err), 0.5);
+  EXPECT_LT(std::abs(fx_err), kFocalTargetPercent);
+  EXPECT_LT(std::abs(fy_err), kFocalTargetPercent);
   EXPECT_NE(f.camera.k3, 0.0);
 }
 
@@ -231,17 +252,18 @@ TEST(CalibCamera, PlanePoseOfATiltedBoard) {
       std::sqrt(sum2 / static_cast<double>(ideal.size())), worst_mm, r.plane.mean_mm_per_px(),
       r.rms_px);
   EXPECT_EQ(r.tags_used, 24);
-  EXPECT_NEAR(r.tilt_deg, tilt, 0.2);
-  EXPECT_LT(normal_err_deg, 0.2);
-  EXPECT_LT(origin_err, 1.0);
-  EXPECT_LT(worst_mm, 0.1);
-  EXPECT_LT(r.rms_px, 0.2);
+  EXPECT_NEAR(r.tilt_deg, tilt, kPlaneAngleTolDeg);
+  EXPECT_LT(normal_err_deg, kPlaneAngleTolDeg);
+  EXPECT_LT(origin_err, kPlaneOriginTolMm);
+  EXPECT_LT(worst_mm, kPlaneCornerTolMm);
+  EXPECT_LT(r.rms_px, kReprojectionRmsTolPx);
 
   // The plane file reads back (read_plane_json validates the rotation and homography).
   test::ScratchDir dir;
   write_plane_json(dir / "plane.json", r.plane);
   const SamplePlane back = read_plane_json(dir / "plane.json");
-  EXPECT_NEAR((back.plane_mm(ideal[0]) - r.plane.plane_mm(ideal[0])).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((back.plane_mm(ideal[0]) - r.plane.plane_mm(ideal[0])).norm(), 0.0,
+              test::kDoubleSolveRoundoff);
 
   // The wrong image size and a board-free image are errors.
   CameraIntrinsics other = intrinsics_of(cam);
@@ -268,7 +290,7 @@ TEST(CalibCamera, CliCalibratesCameraAndPlane) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("calibrate camera: 5 of 5 views"), std::string::npos) << r.out;
   const CameraIntrinsics c = read_camera_json(dir / "camera.json");
-  EXPECT_NEAR(c.fx, true_camera().fx, 0.005 * true_camera().fx);
+  EXPECT_NEAR(c.fx, true_camera().fx, kFocalTargetPercent / 100.0 * true_camera().fx);
   EXPECT_TRUE(fs::exists(dir / "camera_report.json"));
 
   const auto p = test::run_ptmkit({"calibrate", "plane", "--board", board.string(), "--camera",
@@ -280,7 +302,7 @@ TEST(CalibCamera, CliCalibratesCameraAndPlane) {
   EXPECT_EQ(plane.width_px, 640);
   ASSERT_TRUE(plane.pose.has_value());
   // View 1: 25 degrees about board x.
-  EXPECT_NEAR(std::acos(-plane.pose->camera_from_plane(2, 2)) * 180.0 / kPi, 25.0, 0.5);
+  EXPECT_NEAR(std::acos(-plane.pose->camera_from_plane(2, 2)) * 180.0 / kPi, 25.0, kCliTiltTolDeg);
 
   // Errors: a missing image, a missing camera file; exit 1, nothing written.
   const auto e1 =

@@ -9,12 +9,16 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_set.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
 namespace ptmkit::calib {
 namespace {
+
+using test::kDoubleRoundoff;
+using test::kDoubleSolveRoundoff;
 
 void write_text(const fs::path& p, const std::string& s) {
   std::ofstream f(p);
@@ -35,16 +39,17 @@ TEST(CalibDome, LayoutsRadiusAndYaw) {
   const LightSet near = dome_light_set(o);
   for (std::size_t i = 0; i < near.size(); ++i) {
     ASSERT_TRUE(near.lights[i].position_mm.has_value());
-    EXPECT_NEAR((*near.lights[i].position_mm - 500.0 * near.lights[i].direction).norm(), 0.0, 1e-9);
+    EXPECT_NEAR((*near.lights[i].position_mm - 500.0 * near.lights[i].direction).norm(), 0.0,
+                kDoubleSolveRoundoff);
     // Yaw 90: (x, y) -> (-y, x), elevation unchanged.
-    EXPECT_NEAR(near.lights[i].direction.x(), -flat.lights[i].direction.y(), 1e-12);
-    EXPECT_NEAR(near.lights[i].direction.y(), flat.lights[i].direction.x(), 1e-12);
-    EXPECT_NEAR(near.lights[i].direction.z(), flat.lights[i].direction.z(), 1e-12);
+    EXPECT_NEAR(near.lights[i].direction.x(), -flat.lights[i].direction.y(), kDoubleRoundoff);
+    EXPECT_NEAR(near.lights[i].direction.y(), flat.lights[i].direction.x(), kDoubleRoundoff);
+    EXPECT_NEAR(near.lights[i].direction.z(), flat.lights[i].direction.z(), kDoubleRoundoff);
   }
   o.layout = "rings:30:6:15";
   o.radius_mm = 0.0;
   o.yaw_deg = 0.0;
-  EXPECT_NEAR(elevation_deg(dome_light_set(o).lights[0].direction), 30.0, 1e-9);
+  EXPECT_NEAR(elevation_deg(dome_light_set(o).lights[0].direction), 30.0, kDoubleSolveRoundoff);
   o.layout = "pentagon";
   EXPECT_THROW((void)dome_light_set(o), Error);
   o.layout = "icosa";
@@ -61,10 +66,10 @@ TEST(CalibDome, DescriptionFilesWithDirectionsOrPositions) {
   const LightSet set = read_dome_json(dir / "dome.json");
   ASSERT_EQ(set.size(), 3u);
   EXPECT_EQ(set.lights[0].image, dir.path() / "a.jpg");
-  EXPECT_NEAR(set.lights[1].direction.x(), std::sqrt(0.5), 1e-12);
-  EXPECT_NEAR(set.lights[1].position_mm->x(), 300.0, 1e-12);
+  EXPECT_NEAR(set.lights[1].direction.x(), std::sqrt(0.5), kDoubleRoundoff);
+  EXPECT_NEAR(set.lights[1].position_mm->x(), 300.0, kDoubleRoundoff);
   EXPECT_DOUBLE_EQ(set.lights[1].intensity, 0.9);
-  EXPECT_NEAR(set.lights[2].position_mm->y(), 400.0 * std::sqrt(0.5), 1e-9);
+  EXPECT_NEAR(set.lights[2].position_mm->y(), 400.0 * std::sqrt(0.5), kDoubleSolveRoundoff);
   EXPECT_EQ(set.lights[2].image, fs::path("image_003.png"));
 
   write_text(dir / "layout.json", R"({"layout": "icosa", "radius_mm": 250})");
@@ -101,7 +106,8 @@ TEST(CalibDome, CommandWritesTheLightFileAndJsonOrNothing) {
   std::ifstream f(dir / "dome.json");
   const auto j = nlohmann::json::parse(f);
   EXPECT_EQ(j["lights"].size(), 49u);
-  EXPECT_NEAR(j["lights"][48]["position_mm"][2].get<double>(), 500.0, 1e-9);  // zenith light
+  // The zenith light.
+  EXPECT_NEAR(j["lights"][48]["position_mm"][2].get<double>(), 500.0, kDoubleSolveRoundoff);
 
   const auto bad = test::run_ptmkit(
       {"calibrate", "dome", "--layout", "rings:30:12,95:3", "-o", (dir / "bad.lp").string()});
@@ -122,8 +128,9 @@ TEST(CalibDome, JsonWrittenWithPositionsReadsBack) {
   ASSERT_EQ(read.size(), written.size());
   for (std::size_t i = 0; i < read.size(); ++i) {
     ASSERT_TRUE(read.lights[i].position_mm.has_value());
-    EXPECT_LT((*read.lights[i].position_mm - *written.lights[i].position_mm).norm(), 1e-9);
-    EXPECT_LT((read.lights[i].direction - written.lights[i].direction).norm(), 1e-12);
+    EXPECT_LT((*read.lights[i].position_mm - *written.lights[i].position_mm).norm(),
+              kDoubleSolveRoundoff);
+    EXPECT_LT((read.lights[i].direction - written.lights[i].direction).norm(), kDoubleRoundoff);
   }
   // A direction that does not point at the position is refused.
   std::ofstream(dir / "bad.json")

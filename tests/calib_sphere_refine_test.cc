@@ -38,6 +38,29 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 // plane's centre. Light frame -> camera frame: (x, y, z) -> (x, -y, 600 - z).
 constexpr double kDistance = 600.0, kDome = 500.0, kSphere = 25.0;
 
+// Near-light positions within 1% of the dome radius: the requirement (docs/TARGETS.md).
+// Measured worst 0.29% noise-free, 0.62% with noise 2 grey levels.
+constexpr double kNearLightTargetPercent = 1.0;
+// The spheres' centres in the camera frame (600 mm away): measured 0.18 mm off.
+constexpr double kSphereCentreTolMm = 1.0;
+// A good near light's residual (4 measurements, 3 unknowns): measured worst 0.016 px.
+constexpr double kGoodResidualPx = 0.5;
+// A light the spheres disagree about: confidence measured 0.005 (good lights 0.8 or more).
+constexpr double kDisagreeingConfidence = 0.1;
+// Mean error of the other lights, two spheres, distant lights, noise 1 grey: measured 0.012
+// degrees.
+constexpr double kTwoSphereMeanTolDeg = 0.2;
+// Lights of a single orthographic sphere, noise 1 grey level: measured worst 0.033
+// degrees.
+constexpr double kSingleSphereLightTolDeg = 0.3;
+// Confidence of a clean light: measured 0.81 or more.
+constexpr double kCleanConfidence = 0.5;
+// Confidence of the light with a planted second candidate: measured 0.06.
+constexpr double kAmbiguousConfidence = 0.2;
+// One sphere with distant lights: two unknowns, two measurements, so the highlight residual is
+// zero by construction (measured 0); this allows for rounding only.
+constexpr double kExactResidualPx = 1e-3;
+
 Eigen::Vector3d camera_from_light(const Eigen::Vector3d& p) {
   return {p.x(), -p.y(), kDistance - p.z()};
 }
@@ -131,15 +154,16 @@ TEST(CalibSphereRefine, TwoSpheresTriangulateNearLightsWithinOnePercentOfTheDome
       "outline rms %.3f px, %d iterations; 1 degree light, noise 2 grey: mean %.3f max %.3f\n",
       clean.mean, clean.max, linear.mean, linear.max, noisy.mean, noisy.max, r.outline_rms_px,
       r.iterations, small.mean, small.max);
-  // Required: within 1% of the dome radius (docs/TARGETS.md).
-  EXPECT_LT(clean.max, 1.0);
-  EXPECT_LT(noisy.max, 1.0);
+  EXPECT_LT(clean.max, kNearLightTargetPercent);
+  EXPECT_LT(noisy.max, kNearLightTargetPercent);
   // The spheres' centres come back (found, then refined on their outlines).
   ASSERT_EQ(r.centres_camera.size(), 2u);
-  EXPECT_LT((r.centres_camera[0] - camera_from_light({-90.0, 0.0, kSphere})).norm(), 1.0);
-  EXPECT_LT((r.centres_camera[1] - camera_from_light({90.0, 0.0, kSphere})).norm(), 1.0);
+  EXPECT_LT((r.centres_camera[0] - camera_from_light({-90.0, 0.0, kSphere})).norm(),
+            kSphereCentreTolMm);
+  EXPECT_LT((r.centres_camera[1] - camera_from_light({90.0, 0.0, kSphere})).norm(),
+            kSphereCentreTolMm);
   // Near lights: redundancy (4 measurements, 3 unknowns), so the residual means something.
-  for (const RigLight& l : r.lights) EXPECT_LT(l.residual_px, 0.5) << l.flag;
+  for (const RigLight& l : r.lights) EXPECT_LT(l.residual_px, kGoodResidualPx) << l.flag;
   const LightSet set = rig_light_set(r);
   ASSERT_EQ(set.size(), r.lights.size());
   EXPECT_TRUE(set.lights[0].position_mm.has_value());
@@ -187,8 +211,8 @@ TEST(CalibSphereRefine, SpheresThatDisagreeFlagTheLight) {
   EXPECT_TRUE(bad.found);
   EXPECT_TRUE(bad.outlier);
   EXPECT_THAT(bad.flag, ::testing::HasSubstr("residual"));
-  EXPECT_LT(bad.confidence, 0.1);
-  EXPECT_LT(mean_err, 0.2);
+  EXPECT_LT(bad.confidence, kDisagreeingConfidence);
+  EXPECT_LT(mean_err, kTwoSphereMeanTolDeg);
   EXPECT_EQ(rig_light_set(r).size(), dirs.size());  // flagged, still there
   EXPECT_EQ(drop_outliers(&r), 1);                  // dropped when asked
   EXPECT_EQ(rig_light_set(r).size(), dirs.size() - 1);
@@ -220,8 +244,8 @@ TEST(CalibSphereRefine, PlantedReflectionOnOneSphereIsFlaggedAsAmbiguous) {
   for (std::size_t i = 0; i < dirs.size(); ++i) {
     if (i == kBad) continue;
     EXPECT_FALSE(r.lights[i].outlier) << i << ": " << r.lights[i].flag;
-    EXPECT_LT(angle_deg(r.lights[i].direction, dirs[i]), 0.3);
-    EXPECT_GT(r.lights[i].confidence, 0.5) << i;
+    EXPECT_LT(angle_deg(r.lights[i].direction, dirs[i]), kSingleSphereLightTolDeg);
+    EXPECT_GT(r.lights[i].confidence, kCleanConfidence) << i;
   }
   const RigLight& bad = r.lights[kBad];
   std::printf(
@@ -235,9 +259,8 @@ TEST(CalibSphereRefine, PlantedReflectionOnOneSphereIsFlaggedAsAmbiguous) {
       bad.flag.c_str());
   EXPECT_TRUE(bad.outlier);
   EXPECT_THAT(bad.flag, ::testing::HasSubstr("second candidate"));
-  EXPECT_LT(bad.confidence, 0.2);
-  // A single sphere with distant lights: the highlight residual is zero by construction.
-  EXPECT_LT(bad.residual_px, 1e-3);
+  EXPECT_LT(bad.confidence, kAmbiguousConfidence);
+  EXPECT_LT(bad.residual_px, kExactResidualPx);
 }
 
 std::string read_text(const fs::path& path) {
@@ -280,7 +303,8 @@ TEST(CalibSphereRefine, CommandTriangulatesWritesJsonAndDropsOutliersWhenAsked) 
   EXPECT_EQ(report["outliers"], 1);
   const auto& p0 = report["lights"][0]["position_mm"];
   const Eigen::Vector3d truth = kDome * dirs[0];
-  EXPECT_LT((Eigen::Vector3d(p0[0], p0[1], p0[2]) - truth).norm(), 0.01 * kDome);
+  EXPECT_LT((Eigen::Vector3d(p0[0], p0[1], p0[2]) - truth).norm(),
+            kNearLightTargetPercent / 100.0 * kDome);
   EXPECT_TRUE(fs::exists(dir / "l.json"));
   auto dropped = near;
   dropped.push_back("--drop-outliers");

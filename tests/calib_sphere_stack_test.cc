@@ -25,6 +25,23 @@ namespace fs = std::filesystem;
 namespace ptmkit::calib {
 namespace {
 
+// The targets of docs/CALIBRATION.md's sphere-stack table: the circle's centre within 0.5 px
+// and radius within 0.5%, the lights' mean error within 0.2 and the worst within 1 degree.
+// Measured on these renders at most 0.006 px, 0.023%, 0.147 and 0.365 degrees; on the photo
+// renders 0.31 px, 0.32% and a worst light of 0.85 degrees.
+constexpr double kCentreTargetPx = 0.5;
+constexpr double kRadiusTargetRel = 0.005;
+constexpr double kLightMeanTargetDeg = 0.2;
+constexpr double kLightMaxTargetDeg = 1.0;
+// A candidate scoring below the default --min-score (0.5) is never taken (docs/CALIBRATION.md).
+constexpr double kMinScore = 0.5;
+// uw-psm's circle found without a hint against the mask's: measured 0.97 px apart (its lower
+// rim is black on black).
+constexpr double kFoundVsMaskCentrePx = 2.0;
+// uw-psm's lights with the circle found against those with the mask's, both against the
+// published lights: measured mean 2.64 against 3.10 degrees.
+constexpr double kFoundVsMaskMeanDeg = 0.25;
+
 double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 /
          std::numbers::pi;
@@ -127,10 +144,10 @@ void expect_accurate(const StackCalibration& r, const Scene& s, const char* labe
   std::printf("%s: centre off by %.3f px, radius by %.3f%%; lights mean %.3f max %.3f deg (%d)\n",
               label, (c.centre_px - s.centre).norm(),
               100.0 * std::abs(c.radius_px - s.radius) / s.radius, mean, max, usable);
-  EXPECT_LE((c.centre_px - s.centre).norm(), 0.5) << label;
-  EXPECT_LE(std::abs(c.radius_px - s.radius), 0.005 * s.radius) << label;
-  EXPECT_LE(mean, 0.2) << label;
-  EXPECT_LE(max, 1.0) << label;
+  EXPECT_LE((c.centre_px - s.centre).norm(), kCentreTargetPx) << label;
+  EXPECT_LE(std::abs(c.radius_px - s.radius), kRadiusTargetRel * s.radius) << label;
+  EXPECT_LE(mean, kLightMeanTargetDeg) << label;
+  EXPECT_LE(max, kLightMaxTargetDeg) << label;
 }
 
 TEST(CalibSphereStack, FindsTheSphereNotTheCoinAndIgnoresTheWindow) {
@@ -143,7 +160,7 @@ TEST(CalibSphereStack, FindsTheSphereNotTheCoinAndIgnoresTheWindow) {
     if ((c.circle.centre_px - Eigen::Vector2d(430.0, 220.0)).norm() < 15.0) {
       coin_seen = true;
       EXPECT_FALSE(c.chosen);
-      EXPECT_LT(c.score, 0.5) << "coin: " << c.note;
+      EXPECT_LT(c.score, kMinScore) << "coin: " << c.note;
     }
   }
   EXPECT_TRUE(coin_seen) << "the coin is round: it should be a candidate";
@@ -295,9 +312,10 @@ TEST(CalibSphereStack, TwoSpheresWithACoinBetweenThem) {
   o.rig.sphere_count = 2;
   const StackCalibration r = calibrate_sphere_stack(images, left.names, o);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
-  EXPECT_LE((r.rig.spheres[0].sphere.centre_px - left.centre).norm(), 0.5);
-  EXPECT_LE((r.rig.spheres[1].sphere.centre_px - rig.centre_px).norm(), 0.5);
-  EXPECT_LE(std::abs(r.rig.spheres[1].sphere.radius_px - rig.radius_px), 0.005 * rig.radius_px);
+  EXPECT_LE((r.rig.spheres[0].sphere.centre_px - left.centre).norm(), kCentreTargetPx);
+  EXPECT_LE((r.rig.spheres[1].sphere.centre_px - rig.centre_px).norm(), kCentreTargetPx);
+  EXPECT_LE(std::abs(r.rig.spheres[1].sphere.radius_px - rig.radius_px),
+            kRadiusTargetRel * rig.radius_px);
   double mean = 0.0, max = 0.0;
   for (std::size_t i = 0; i < left.lights.size(); ++i) {
     EXPECT_TRUE(r.rig.lights[i].found) << r.rig.lights[i].flag;
@@ -306,8 +324,8 @@ TEST(CalibSphereStack, TwoSpheresWithACoinBetweenThem) {
     max = std::max(max, a);
   }
   std::printf("two spheres and a coin: lights mean %.3f max %.3f deg\n", mean, max);
-  EXPECT_LE(mean, 0.2);
-  EXPECT_LE(max, 1.0);
+  EXPECT_LE(mean, kLightMeanTargetDeg);
+  EXPECT_LE(max, kLightMaxTargetDeg);
 }
 
 TEST(CalibSphereStack, SameResultWithOneOrTwoThreads) {
@@ -386,8 +404,8 @@ TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
     std::printf("photo-dome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
                 (c.centre_px - t.centre_px).norm(),
                 100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
-    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
-    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), kCentreTargetPx);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), kRadiusTargetRel * t.radius_px);
     // Never the coin.
     EXPECT_GT((c.centre_px - truth.distractor_centre_px).norm(), truth.distractor_radius_px);
   }
@@ -401,7 +419,7 @@ TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
   // Measured, not yet at the 0.2 / 1 degree target on these renders (docs/CALIBRATION.md);
   // bounded here at what a wrong highlight or circle would exceed many times over.
   std::printf("photo-dome lights: mean %.3f max %.3f deg\n", mean, max);
-  EXPECT_LE(max, 1.0);
+  EXPECT_LE(max, kLightMaxTargetDeg);
 }
 
 // Chrome spheres with a glazed dish beside them: the dish's glint moves with the light too,
@@ -428,8 +446,8 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
     std::printf("photo-chrome sphere %zu: centre off %.3f px, radius off %.3f%%\n", k,
                 (c.centre_px - t.centre_px).norm(),
                 100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px);
-    EXPECT_LE((c.centre_px - t.centre_px).norm(), 0.5);
-    EXPECT_LE(std::abs(c.radius_px - t.radius_px), 0.005 * t.radius_px);
+    EXPECT_LE((c.centre_px - t.centre_px).norm(), kCentreTargetPx);
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px), kRadiusTargetRel * t.radius_px);
   }
   for (const SphereCandidate& c : r.candidates) {
     if ((c.circle.centre_px - truth.distractor_centre_px).norm() <
@@ -481,8 +499,8 @@ TEST(CalibSphereStack, RealChromeSphereFoundWithoutAnyHint) {
   // black), and the lights with the published ones as closely as with the mask.
   EXPECT_LE(
       (found.rig.spheres[0].sphere.centre_px - with_mask.rig.spheres[0].sphere.centre_px).norm(),
-      2.0);
-  EXPECT_LE(mean_found, mean_masked + 0.25);
+      kFoundVsMaskCentrePx);
+  EXPECT_LE(mean_found, mean_masked + kFoundVsMaskMeanDeg);
 }
 
 }  // namespace

@@ -16,11 +16,36 @@
 #include "ptmkit/core/light_set.h"
 #include "ptmkit/synth/rig.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 
 namespace ptmkit::calib {
 namespace {
+
+// Mean light error, orthographic noise-free renders: the target of docs/CALIBRATION.md's
+// sphere accuracy table (measured 0.029 degrees with the circle given, 0.030 found).
+constexpr double kOrthographicTargetDeg = 0.1;
+// Mean light error, off-axis pinhole renders with noise 2 grey levels: the target of
+// docs/CALIBRATION.md's sphere accuracy table (measured 0.024 degrees).
+constexpr double kPerspectiveTargetDeg = 0.5;
+// The circle found on a noise-free render: measured 0.009 px off in centre and radius.
+constexpr double kFoundCircleTolPx = 0.1;
+// The orthographic model on the off-axis render is measurably worse than the perspective one
+// (measured 9.1 against 0.024 degrees): by more than this factor.
+constexpr double kOrthographicWorseFactor = 2.0;
+// A sphere cut by the frame and on a stand, noise 1 grey level: circle measured 0.02 px off.
+constexpr double kCroppedCircleTolPx = 1.0;
+// Its worst usable light: measured 0.225 degrees (docs/CALIBRATION.md: 0.23).
+constexpr double kCroppedWorstLightDeg = 0.5;
+// uw-psm's published lights came from a simpler estimator (its README: expect differences of a
+// few degrees); one pixel of highlight is about a degree here and every highlight is a
+// saturated, flared blob of about 10 px, so locators differ by a few pixels: measured 3.10
+// degrees mean (docs/CALIBRATION.md). A broken estimator (a flipped axis, a wrong circle) is
+// tens of degrees off.
+constexpr double kPublishedChromeAgreementDeg = 5.0;
+// Lights through the command (8-bit PNG renders): measured worst 0.043 degrees.
+constexpr double kCommandLightTolDeg = 0.3;
 
 double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 /
@@ -63,15 +88,15 @@ TEST(CalibSphere, OrthographicNoiseFreeWithinATenthOfADegree) {
   const Errors known = errors(calibrate_sphere(images, names, given), lights);
   const SphereReport found = calibrate_sphere(images, names, {});
   EXPECT_TRUE(found.sphere_detected);
-  EXPECT_NEAR((found.sphere.centre_px - rig.centre_px).norm(), 0.0, 0.1);
-  EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, 0.1);
+  EXPECT_NEAR((found.sphere.centre_px - rig.centre_px).norm(), 0.0, kFoundCircleTolPx);
+  EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, kFoundCircleTolPx);
   const Errors detected = errors(found, lights);
   std::printf(
       "orthographic, r = 160 px, noise-free: mean %.4f max %.4f deg (circle given); "
       "mean %.4f max %.4f deg (circle found)\n",
       known.mean, known.max, detected.mean, detected.max);
-  EXPECT_LE(known.mean, 0.1);
-  EXPECT_LE(detected.mean, 0.1);
+  EXPECT_LE(known.mean, kOrthographicTargetDeg);
+  EXPECT_LE(detected.mean, kOrthographicTargetDeg);
   // Refined as a rig (one sphere, distant lights: the circle from its outline, each light
   // from its highlight); a clean render has no outliers.
   RigOptions rig_options;
@@ -85,7 +110,7 @@ TEST(CalibSphere, OrthographicNoiseFreeWithinATenthOfADegree) {
   std::printf("  refined (circle found): mean %.4f max %.4f deg, %d outliers\n", e_refined.mean,
               e_refined.max, refined.outliers());
   EXPECT_EQ(refined.outliers(), 0);
-  EXPECT_LE(e_refined.mean, 0.1);
+  EXPECT_LE(e_refined.mean, kOrthographicTargetDeg);
 }
 
 TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
@@ -119,8 +144,8 @@ TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
       "pinhole f = 1400 px, off-axis, noise 2 grey: perspective model mean %.3f max %.3f "
       "deg; orthographic model mean %.3f max %.3f deg\n",
       p.mean, p.max, o.mean, o.max);
-  EXPECT_LE(p.mean, 0.5);
-  EXPECT_GT(o.mean, 2.0 * p.mean);
+  EXPECT_LE(p.mean, kPerspectiveTargetDeg);
+  EXPECT_GT(o.mean, kOrthographicWorseFactor * p.mean);
   RigOptions rig_options;
   rig_options.detection = persp;
   const RigReport refined = calibrate_rig(images, names, rig_options);
@@ -133,7 +158,7 @@ TEST(CalibSphere, PerspectiveOffAxisWithNoiseWithinHalfADegree) {
   std::printf("  refined: mean %.3f max %.3f deg, %d outliers, outline rms %.3f px\n",
               e_refined.mean, e_refined.max, refined.outliers(), refined.outline_rms_px);
   EXPECT_EQ(refined.outliers(), 0);
-  EXPECT_LE(e_refined.mean, 0.5);  // the orthographic model is measurably worse off-axis
+  EXPECT_LE(e_refined.mean, kPerspectiveTargetDeg);
 }
 
 // A sphere partly outside the frame and held by a stand (a grey rod from below touching its
@@ -167,8 +192,8 @@ TEST(CalibSphere, CroppedSphereOnAStandIsFoundAndItsLightsAreRightOrFlagged) {
   std::printf("cropped sphere on a stand: found at (%.2f, %.2f) r %.2f (true %.2f, %.2f, %.2f)\n",
               found.sphere.centre_px.x(), found.sphere.centre_px.y(), found.sphere.radius_px,
               rig.centre_px.x(), rig.centre_px.y(), rig.radius_px);
-  EXPECT_LT((found.sphere.centre_px - rig.centre_px).norm(), 1.0);
-  EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, 1.0);
+  EXPECT_LT((found.sphere.centre_px - rig.centre_px).norm(), kCroppedCircleTolPx);
+  EXPECT_NEAR(found.sphere.radius_px, rig.radius_px, kCroppedCircleTolPx);
   int usable = 0;
   double worst = 0.0;
   for (std::size_t i = 0; i < lights.size(); ++i) {
@@ -178,7 +203,7 @@ TEST(CalibSphere, CroppedSphereOnAStandIsFoundAndItsLightsAreRightOrFlagged) {
   }
   std::printf("  %d of %zu lights usable, worst %.3f deg\n", usable, lights.size(), worst);
   EXPECT_GE(usable, static_cast<int>(lights.size()) - 2);
-  EXPECT_LT(worst, 0.5);
+  EXPECT_LT(worst, kCroppedWorstLightDeg);
 }
 
 TEST(CalibSphere, UnusableImagesAreFlaggedNotGuessed) {
@@ -233,12 +258,7 @@ TEST(CalibSphere, RealChromeSphereAgreesWithThePublishedLights) {
       "max %.2f deg\n",
       r.sphere.centre_px.x(), r.sphere.centre_px.y(), r.sphere.radius_px, e.mean, e.max);
   EXPECT_EQ(r.usable(), n);
-  // The data's README: the published directions came from a simpler estimator, "expect
-  // differences of a few degrees". Here one pixel of highlight position is about 1 degree
-  // (radius 119.5 px) and every highlight is a saturated, flared blob of about 10 px, so
-  // locators differ by a few pixels; measured 3.1 degrees mean (docs/CALIBRATION.md). A
-  // broken estimator (a flipped axis, a wrong circle) is tens of degrees off.
-  EXPECT_LE(e.mean, 5.0);
+  EXPECT_LE(e.mean, kPublishedChromeAgreementDeg);
   RigOptions rig_options;
   rig_options.spheres = {o.sphere.value()};
   const RigReport refined = calibrate_rig(images, names, rig_options);
@@ -253,7 +273,7 @@ TEST(CalibSphere, RealChromeSphereAgreesWithThePublishedLights) {
   for (const RigLight& l : refined.lights) {
     if (l.outlier) std::printf("    %s: %s\n", l.image.filename().string().c_str(), l.flag.c_str());
   }
-  EXPECT_LE(e_refined.mean, 5.0);
+  EXPECT_LE(e_refined.mean, kPublishedChromeAgreementDeg);
 }
 
 TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
@@ -284,7 +304,7 @@ TEST(CalibSphere, CommandWritesUsableLightsAndFlagsTheRest) {
   const LightSet lp = read_lp(dir / "lights.lp");
   ASSERT_EQ(lp.size(), lights.size());
   for (std::size_t i = 0; i < lights.size(); ++i) {
-    EXPECT_LT(angle_deg(lp.lights[i].direction, lights[i]), 0.3);  // 8-bit images
+    EXPECT_LT(angle_deg(lp.lights[i].direction, lights[i]), kCommandLightTolDeg);
   }
   EXPECT_TRUE(fs::exists(dir / "report.json"));
   EXPECT_EQ(test::list_files(dir / "overlays").size(), lights.size() + 1);

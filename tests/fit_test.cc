@@ -15,6 +15,7 @@
 #include "ptmkit/core/stack_reader.h"
 #include "ptmkit/synth/synth.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 using ::testing::HasSubstr;
 
@@ -22,6 +23,28 @@ namespace fs = std::filesystem;
 
 namespace ptmkit::fit {
 namespace {
+
+using test::kDoubleSolveRoundoff;
+using test::kFloatRoundoff;
+using test::kFloatSumRoundoff;
+
+// The float path rounds the pseudo-inverse and the products as well as the samples: a few
+// roundings per coefficient more than the double path.
+constexpr double kFloatPathRoundings = 8.0;
+// Residuals of an exact world fitted from float samples: a few float ulps, in grey levels.
+constexpr double kExactResidualUlps = 8.0;
+// The RMS of 158k residuals of noise sigma 2.4 grey levels varies by 0.004 (sigma / sqrt(2N)):
+// this is 25 of those.
+constexpr double kNoiseRmsTolGrey = 0.1;
+// An exact luminance-times-colour texture fitted in float: 255 x a few ulps (1.2e-7) is about
+// 1e-4 grey levels.
+constexpr double kExactFitMaxResidualGrey = 1e-3;
+// Six lights interpolated by the exact 6 x 6 solve in double: eps 2.2e-16 times its
+// condition number (cond 21.7 here: 5e-15; measured 3e-16).
+constexpr double kSixLightInterpolationTol = 1e-10;
+// One ring leaves A rank-deficient: its condition number is infinite up to rounding (1/eps is
+// 4.5e15; a ring measures 1.5e16); the fit refuses layouts above 1e5.
+constexpr double kSingularCondition = 1e12;
 
 std::vector<Eigen::Vector3d> dome49() { return calib::layout_directions("dome49"); }
 
@@ -50,14 +73,14 @@ std::vector<Image> render_world(const CoefficientMap& map,
   return images;
 }
 
-// Largest absolute row sum of the pseudo-inverse: how much an error in the samples can move a
-// coefficient (infinity-norm amplification).
 // Bit-for-bit equality of two float arrays (memcmp must not see the null data() of an empty one).
 bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() &&
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
 }
 
+// Largest absolute row sum of the pseudo-inverse: how much an error in the samples can move a
+// coefficient (infinity-norm amplification).
 double pinv_gain(const LightDesign& design) {
   return design.pseudo_inverse().cwiseAbs().rowwise().sum().maxCoeff();
 }
@@ -79,7 +102,8 @@ TEST(LightDesign, RecoversAnExactPolynomialToDoublePrecision) {
       }
       double got[6];
       design.solve(samples.data(), got);
-      for (int k = 0; k < 6; ++k) ASSERT_NEAR(got[k], truth[k], 1e-9) << "term " << k;
+      for (int k = 0; k < 6; ++k)
+        ASSERT_NEAR(got[k], truth[k], kDoubleSolveRoundoff) << "term " << k;
     }
   }
 }
@@ -99,15 +123,15 @@ TEST(FitImages, RecoversThePolynomialWorldWithinFloatInputPrecision) {
     // result; the float path also rounds the pseudo-inverse and the products.
     const double eps = std::ldexp(1.0, -24);
     const double tol =
-        pinv_gain(design) * eps * (precision == Precision::kFloat ? 8.0 : 1.0) + 2.0 * eps;
+        pinv_gain(design) * eps * (precision == Precision::kFloat ? kFloatPathRoundings : 1.0) +
+        2.0 * eps;
     ASSERT_EQ(got.coeffs.size(), truth.coeffs.size());
     for (std::size_t i = 0; i < got.coeffs.size(); ++i) {
       ASSERT_NEAR(got.coeffs[i], truth.coeffs[i], tol) << "index " << i;
     }
-    EXPECT_LT(report.residuals.rms_grey, 255.0 * 8 * eps);
+    EXPECT_LT(report.residuals.rms_grey, 255.0 * kExactResidualUlps * eps);
     EXPECT_EQ(report.lights, 49);
-    EXPECT_NEAR(report.design.condition_number, 5.3,
-                0.2);  // the dome49 layout's cond(A) (docs/TARGETS.md)
+    EXPECT_NEAR(report.design.condition_number, test::kDome49Condition, test::kDome49ConditionTol);
   }
 }
 
@@ -141,7 +165,7 @@ TEST(FitImages, ResultsDoNotDependOnThreadsOrBandSize) {
     EXPECT_EQ(reports[i % 3].residuals.p99_abs_grey, reports[i].residuals.p99_abs_grey);
   }
   // Noise of sigma 0.01 (2.55 grey) leaves residuals of sigma * sqrt((N - 6) / N) in RGB.
-  EXPECT_NEAR(reports[0].residuals.rms_grey, 2.55 * std::sqrt(43.0 / 49.0), 0.1);
+  EXPECT_NEAR(reports[0].residuals.rms_grey, 2.55 * std::sqrt(43.0 / 49.0), kNoiseRmsTolGrey);
 }
 
 TEST(FitImages, LuminanceModelsReproduceAConstantChromaTexture) {
@@ -167,20 +191,20 @@ TEST(FitImages, LuminanceModelsReproduceAConstantChromaTexture) {
   FitOptions options;
   options.model = ColourModel::kLRGB;
   const FitReport rl = fit_images(images, dirs, options, lrgb_sink);
-  EXPECT_LT(rl.residuals.max_abs_grey, 1e-3);
-  EXPECT_NEAR(lrgb.texel_colour(6, 3)[0], 1.0f, 1e-6);
-  EXPECT_NEAR(lrgb.texel_colour(6, 3)[2], colour[2] / colour[0], 1e-5);
+  EXPECT_LT(rl.residuals.max_abs_grey, kExactFitMaxResidualGrey);
+  EXPECT_NEAR(lrgb.texel_colour(6, 3)[0], 1.0f, kFloatRoundoff);
+  EXPECT_NEAR(lrgb.texel_colour(6, 3)[2], colour[2] / colour[0], kFloatSumRoundoff);
 
   CoefficientMap ycc;
   CoefficientMapSink ycc_sink(&ycc);
   options.model = ColourModel::kYCC;
   (void)fit_images(images, dirs, options, ycc_sink);
   for (int x = 0; x < 4; ++x) {
-    EXPECT_NEAR(ycc.texel_colour(x, 2)[0], 0.0f, 1e-6);
+    EXPECT_NEAR(ycc.texel_colour(x, 2)[0], 0.0f, kFloatRoundoff);
     float got[3], want[3];
     ycc.evaluate(x, 2, 0.3, 0.4, got);
     lum.evaluate(x, 2, 0.3, 0.4, want);
-    EXPECT_NEAR(got[1], want[0], 1e-5);
+    EXPECT_NEAR(got[1], want[0], kFloatSumRoundoff);
   }
 }
 
@@ -240,7 +264,7 @@ TEST(LightDesign, RefusesLayoutsThatCannotBeFittedAndSaysWhy) {
   const LightDesign d = LightDesign::build(ring_layout(parse_rings("30:12")), ridge);
   EXPECT_TRUE(d.report().regularised);
   EXPECT_TRUE(d.report().single_ring);
-  EXPECT_GT(d.report().condition_number, 1e12);
+  EXPECT_GT(d.report().condition_number, kSingularCondition);
   // A tiny condition limit refuses even a good dome.
   DesignOptions strict;
   strict.max_condition = 2.0;
@@ -265,7 +289,7 @@ TEST(LightDesign, ExactlySixLightsInterpolate) {
     const auto b = ptm_basis(dirs[i].x(), dirs[i].y());
     double v = 0;
     for (int k = 0; k < 6; ++k) v += c[k] * b[k];
-    EXPECT_NEAR(v, samples[i], 1e-10);
+    EXPECT_NEAR(v, samples[i], kSixLightInterpolationTol);
   }
 }
 
@@ -331,7 +355,7 @@ TEST(PolynomialWorld, ExactRecoveryOfEveryTexelInDouble) {
       }
     }
   }
-  EXPECT_LT(worst, 1e-9);
+  EXPECT_LT(worst, kDoubleSolveRoundoff);
   std::printf("polynomial world %dx%d, %zu lights: max coefficient error %.3g\n", scene.width,
               scene.height, dirs.size(), worst);
 }

@@ -11,12 +11,25 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/stack_reader.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
 namespace ptmkit {
 namespace {
+
+using test::kFloatRoundoff;
+using test::kHalf16BitStep;
+using test::kHalf8BitStep;
+
+// A decoded value in float: rounded to within about one ulp of values near 1 (1.2e-7).
+constexpr double kFloatDecodeSlack = 1e-7;
+// JPEG at quality 98 of a smooth ramp: measured worst 1.3 grey levels.
+constexpr double kJpegQuality98Tol = 3.0 / 255;
+// A 16-bit file read back: half a step is 7.6e-6; this is well above it and far below what a
+// misplaced row or a wrong encoding moves a value (a tenth or more).
+constexpr double kU16ReadBackTol = 1e-4;
 
 Image ramp(int w, int h, int c, double phase = 0.0) {
   Image img(w, h, c, ColourSpace::kSRGB);
@@ -43,9 +56,9 @@ TEST(ImageIO, RoundTripsEachFormatWithinItsPrecision) {
     PixelFormat format;
     double tol;
   };
-  for (const Case& c : {Case{"a.png", PixelFormat::kU8, 0.5 / 255 + 1e-7},
-                        Case{"b.png", PixelFormat::kU16, 0.5 / 65535 + 1e-7},
-                        Case{"c.tif", PixelFormat::kU16, 0.5 / 65535 + 1e-7},
+  for (const Case& c : {Case{"a.png", PixelFormat::kU8, kHalf8BitStep + kFloatDecodeSlack},
+                        Case{"b.png", PixelFormat::kU16, kHalf16BitStep + kFloatDecodeSlack},
+                        Case{"c.tif", PixelFormat::kU16, kHalf16BitStep + kFloatDecodeSlack},
                         Case{"d.exr", PixelFormat::kF32, 0.0}}) {
     write_image(dir / c.name, img.view(), {.format = c.format});
     const ImageInfo info = probe_image(dir / c.name);
@@ -69,7 +82,7 @@ TEST(ImageIO, JpegIsReadAndColourSpaceIsRecorded) {
   write_image(dir / "a.jpg", img.view(), {.format = PixelFormat::kU8, .jpeg_quality = 98});
   const Image back = read_image(dir / "a.jpg");
   EXPECT_EQ(back.colour_space(), ColourSpace::kSRGB);
-  EXPECT_LT(max_diff(img, back), 3.0 / 255);  // lossy, but within a few levels at quality 98
+  EXPECT_LT(max_diff(img, back), kJpegQuality98Tol);
   img.set_colour_space(ColourSpace::kLinear);
   write_image(dir / "lin.exr", img.view(), {.format = PixelFormat::kF32});
   EXPECT_EQ(read_image(dir / "lin.exr").colour_space(), ColourSpace::kLinear);
@@ -132,7 +145,8 @@ TEST(StackReader, BandsReassembleTheImagesInAnyBandSize) {
         for (int r = 0; r < band.rows; ++r)
           for (int x = 0; x < 23; ++x)
             for (int c = 0; c < 3; ++c)
-              ASSERT_NEAR(band.sample(i, r, x, c), originals[i].at(x, band.y0 + r, c), 1e-4);
+              ASSERT_NEAR(band.sample(i, r, x, c), originals[i].at(x, band.y0 + r, c),
+                          kU16ReadBackTol);
       covered += band.rows;
     }
     EXPECT_EQ(covered, 19);
@@ -237,9 +251,9 @@ TEST(ImageIO, NormalMapsRoundTripAsFloatsOrAsHalfPlusHalf) {
   EXPECT_EQ(probe_image(dir / "n.png").format, PixelFormat::kU16);
   EXPECT_EQ(max_diff(read_normal_map(dir / "n.exr"), n), 0.0);
   // 16 bits of (n + 1) / 2: half a step of 1/65535, doubled by the decoding.
-  EXPECT_LE(max_diff(read_normal_map(dir / "n.png"), n), 1.0 / 65535 + 1e-6);
+  EXPECT_LE(max_diff(read_normal_map(dir / "n.png"), n), 2.0 * kHalf16BitStep + kFloatRoundoff);
   // The PNG holds (n + 1) / 2: the zenith normal's z is stored as full scale.
-  EXPECT_NEAR(read_image(dir / "n.png").at(4, 3, 2), 0.5 * (n.at(4, 3, 2) + 1.0), 1e-4);
+  EXPECT_NEAR(read_image(dir / "n.png").at(4, 3, 2), 0.5 * (n.at(4, 3, 2) + 1.0), kU16ReadBackTol);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/light_layout.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
@@ -15,7 +16,11 @@ using ::testing::HasSubstr;
 namespace ptmkit {
 namespace {
 
-constexpr double kUnitTol = 1e-12;
+using test::kDoubleRoundoff;
+
+// Written with 17 significant digits a double reads back exactly; the reader's normalisation
+// then moves each component by a few ulps (2.2e-16).
+constexpr double kRoundTripTol = 1e-15;
 
 void write_text(const fs::path& p, const std::string& s) {
   std::ofstream f(p, std::ios::binary);
@@ -39,10 +44,10 @@ TEST(LightSet, ReadsCountLineTabsCrlfAndNormalises) {
   const LightSet set = read_lp(dir / "a.lp");
   ASSERT_EQ(set.size(), 3u);
   EXPECT_EQ(set.lights[0].image, dir.path() / "img1.png");
-  EXPECT_NEAR(set.lights[0].direction.z(), 1.0, kUnitTol);
-  EXPECT_NEAR(set.lights[1].direction.x(), 0.6, kUnitTol);
-  for (const auto& l : set.lights) EXPECT_NEAR(l.direction.norm(), 1.0, kUnitTol);
-  EXPECT_NEAR(set.lights[2].direction.x(), 1.0 / std::sqrt(3.0), kUnitTol);
+  EXPECT_NEAR(set.lights[0].direction.z(), 1.0, kDoubleRoundoff);
+  EXPECT_NEAR(set.lights[1].direction.x(), 0.6, kDoubleRoundoff);
+  for (const auto& l : set.lights) EXPECT_NEAR(l.direction.norm(), 1.0, kDoubleRoundoff);
+  EXPECT_NEAR(set.lights[2].direction.x(), 1.0 / std::sqrt(3.0), kDoubleRoundoff);
 }
 
 TEST(LightSet, CountLineIsOptionalAndRelativePathsResolve) {
@@ -92,7 +97,7 @@ TEST(LightSet, WriteThenReadIsExactAndRewriteIsByteIdentical) {
   ASSERT_EQ(back.size(), set.size());
   for (std::size_t i = 0; i < set.size(); ++i) {
     EXPECT_EQ(back.lights[i].image, set.lights[i].image);
-    EXPECT_NEAR((back.lights[i].direction - set.lights[i].direction).norm(), 0.0, 1e-15);
+    EXPECT_NEAR((back.lights[i].direction - set.lights[i].direction).norm(), 0.0, kRoundTripTol);
   }
   write_lp(dir / "again.lp", back, {.count_line = true, .precision = 17});
   std::ifstream a(dir / "out.lp"), b(dir / "again.lp");
@@ -108,7 +113,7 @@ TEST(LightLayout, GeodesicDomeMatchesThePaper) {
   EXPECT_EQ(d1.size(), 10u);
   EXPECT_EQ(d2.size(), 40u);  // the seed paper's 40 lights
   for (const auto& d : d2) {
-    EXPECT_NEAR(d.norm(), 1.0, kUnitTol);
+    EXPECT_NEAR(d.norm(), 1.0, kDoubleRoundoff);
     EXPECT_GT(d.z(), 0.0);
   }
   // Ordered from the zenith down.
@@ -124,8 +129,8 @@ TEST(LightLayout, RingsParseAndLayOut) {
   EXPECT_EQ(ring_layout(rings).size(), 49u);
   const auto r = ring_layout(parse_rings("45:4:90"));
   ASSERT_EQ(r.size(), 4u);
-  EXPECT_NEAR(r[0].x(), 0.0, 1e-12);
-  EXPECT_NEAR(r[0].y(), std::cos(M_PI / 4), 1e-12);
+  EXPECT_NEAR(r[0].x(), 0.0, kDoubleRoundoff);
+  EXPECT_NEAR(r[0].y(), std::cos(M_PI / 4), kDoubleRoundoff);
   EXPECT_THROW((void)parse_rings("45"), Error);
   EXPECT_THROW((void)parse_rings("0:4"), Error);
   EXPECT_THROW((void)parse_rings("95:4"), Error);

@@ -12,9 +12,19 @@
 namespace ptmkit {
 namespace {
 
+// SynthRTI multi2/mat5 relit at its 20 test lights: mean PSNR >= 20.0 dB, the requirement
+// (docs/TARGETS.md); measured 20.18 dB.
+constexpr double kSynthRtiTargetPsnrDb = 20.0;
+// Loewenkopf's 240 lights: measured cond(A) 5.37.
+constexpr double kLoewenkopfMaxCondition = 20.0;
+// The stored 8-bit .ptm's RMS error at the capture lights against the fit's own residual: apart
+// by at most half a grey level plus 5% of the residual (measured 0.34 grey levels apart, the
+// residual 11.3).
+constexpr double kQuantisationAddsGrey = 0.5;
+constexpr double kQuantisationAddsRel = 0.05;
+
 // SynthRTI Multi/Object2/material5: 49 training lights, 20 test lights at other elevations.
-// Plain least squares, three polynomials, stored as an 8-bit .ptm, relit at the test lights:
-// required: at least 20.0 dB (docs/TARGETS.md).
+// Plain least squares, three polynomials, stored as an 8-bit .ptm, relit at the test lights.
 TEST(RealData, SynthRtiRgbFitRelightsHeldOutLightsAbove20dB) {
   const auto root = test::shared_data("synthrti-multi2-mat5");
   if (!root) GTEST_SKIP() << "../shared/data/synthrti-multi2-mat5 is absent";
@@ -36,7 +46,7 @@ TEST(RealData, SynthRtiRgbFitRelightsHeldOutLightsAbove20dB) {
   const double mean_psnr = sum_psnr / static_cast<double>(test_set.size());
   RecordProperty("mean_psnr_db", std::to_string(mean_psnr));
   std::printf("SynthRTI multi2/mat5, rgb LS, .ptm, 20 test lights: mean PSNR %.3f dB\n", mean_psnr);
-  EXPECT_GE(mean_psnr, 20.0);
+  EXPECT_GE(mean_psnr, kSynthRtiTargetPsnrDb);
 }
 
 // Loewenkopf: 240 real photographs (64x43 JPEG) of a carved lion head.
@@ -53,7 +63,7 @@ TEST(RealData, LoewenkopfFitsAndReproducesItsPhotographs) {
     const fit::FitReport report = fit::fit_capture(lights, options, writer);
     EXPECT_EQ(report.width, 64);
     EXPECT_EQ(report.height, 43);
-    EXPECT_LT(report.design.condition_number, 20.0);
+    EXPECT_LT(report.design.condition_number, kLoewenkopfMaxCondition);
     const CoefficientMap map = texture::read_ptm(dir / "lion.ptm");
     // The fit's own residual (unquantised) and the stored file's error at the capture lights
     // agree to within what 8-bit quantisation adds.
@@ -68,7 +78,8 @@ TEST(RealData, LoewenkopfFitsAndReproducesItsPhotographs) {
     const double rms_grey = 255.0 * std::sqrt(sum_sq / static_cast<double>(n));
     std::printf("loewenkopf %s: fit residual rms %.2f grey, stored .ptm rms %.2f grey\n",
                 std::string(to_string(model)).c_str(), report.residuals.rms_grey, rms_grey);
-    EXPECT_NEAR(rms_grey, report.residuals.rms_grey, 0.5 + 0.05 * report.residuals.rms_grey);
+    EXPECT_NEAR(rms_grey, report.residuals.rms_grey,
+                kQuantisationAddsGrey + kQuantisationAddsRel * report.residuals.rms_grey);
   }
 }
 

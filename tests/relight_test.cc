@@ -13,11 +13,29 @@
 #include "ptmkit/texture/metrics.h"
 #include "ptmkit/texture/relight.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace fs = std::filesystem;
 
 namespace ptmkit::texture {
 namespace {
+
+using test::kFloatRoundoff;
+
+// 0.5 + sqrt(0.5) = 1.207 unclamped: above this, clearly past the clamp at 1.
+constexpr float kUnclampedAbove = 1.2f;
+// 0.5 - sqrt(0.5) = -0.207 unclamped: below this, clearly past the clamp at 0.
+constexpr float kUnclampedBelow = -0.2f;
+// Metrics of float pixels: 0.6f - 0.5f is 0.1 to 2.4e-7 relative, which moves a PSNR (dB) or a
+// mean (grey levels) by about 1e-6.
+constexpr double kFloatMetricTol = 1e-3;
+// A difference of float rounding only (1e-7 at most) scores above 140 dB; one grey level of
+// real difference scores 48 dB.
+constexpr double kRoundingOnlyPsnrDb = 120.0;
+// 8-bit rounding only: RMS 1/sqrt(12) grey levels, about 59 dB.
+constexpr double kEightBitPsnrDb = 55.0;
+// 8-bit rounding only: at most half a grey level per sample (a quarter on average).
+constexpr double kEightBitMeanAbsGrey = 0.5;
 
 // Same polynomial in every channel of every texel, plus a texel-dependent a5 so rows differ.
 CoefficientMap polynomial_map(int w, int h, const std::array<float, 6>& a) {
@@ -54,9 +72,8 @@ TEST(Relight, QuadraticMatchesTheAnalyticValueWithANonUnitLight) {
   const double expected0 =
       a[0] * lu * lu + a[1] * lv * lv + a[2] * lu * lv + a[3] * lu + a[4] * lv + a[5];
   const Image img = relight(map, light);
-  constexpr double kFloatTolerance = 1e-6;
-  EXPECT_NEAR(img.at(0, 0, 0), expected0, kFloatTolerance);
-  EXPECT_NEAR(img.at(2, 1, 1), expected0 + 0.01 * (2 + 2 + 1), kFloatTolerance);
+  EXPECT_NEAR(img.at(0, 0, 0), expected0, kFloatRoundoff);
+  EXPECT_NEAR(img.at(2, 1, 1), expected0 + 0.01 * (2 + 2 + 1), kFloatRoundoff);
 }
 
 TEST(Relight, LightAtOrBelowTheHorizonIsBlack) {
@@ -83,10 +100,10 @@ TEST(Relight, ClampIsOptional) {
   raw.clamp = false;
   const Eigen::Vector3d l(1, 0, 1);  // lu = 0.707: 0.5 + 0.707 > 1
   EXPECT_EQ(relight(map, l).at(0, 0, 0), 1.0f);
-  EXPECT_GT(relight(map, l, raw).at(0, 0, 0), 1.2f);
+  EXPECT_GT(relight(map, l, raw).at(0, 0, 0), kUnclampedAbove);
   const Eigen::Vector3d dark(-1, 0, 1);  // 0.5 - 0.707 < 0
   EXPECT_EQ(relight(map, dark).at(0, 0, 0), 0.0f);
-  EXPECT_LT(relight(map, dark, raw).at(0, 0, 0), -0.2f);
+  EXPECT_LT(relight(map, dark, raw).at(0, 0, 0), kUnclampedBelow);
 }
 
 TEST(Relight, LrgbAndYccFollowTheirColourModels) {
@@ -98,7 +115,7 @@ TEST(Relight, LrgbAndYccFollowTheirColourModels) {
   const Eigen::Vector3d l(0.6, 0, 0.8);
   const double lum = 0.6 + 0.2 * 0.6;
   const Image a = relight(lrgb, l);
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(a.at(0, 0, c), lum * col[c], 1e-6);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(a.at(0, 0, c), lum * col[c], kFloatRoundoff);
 
   CoefficientMap ycc(1, 1, ColourModel::kYCC);
   std::copy_n(poly, 6, ycc.texel_coeffs(0, 0));
@@ -107,9 +124,9 @@ TEST(Relight, LrgbAndYccFollowTheirColourModels) {
   double r = 0, g = 0, b = 0;
   from_ycbcr({lum, 0.05f, -0.04f}, &r, &g, &b);
   const Image y = relight(ycc, l);
-  EXPECT_NEAR(y.at(0, 0, 0), r, 1e-6);
-  EXPECT_NEAR(y.at(0, 0, 1), g, 1e-6);
-  EXPECT_NEAR(y.at(0, 0, 2), b, 1e-6);
+  EXPECT_NEAR(y.at(0, 0, 0), r, kFloatRoundoff);
+  EXPECT_NEAR(y.at(0, 0, 1), g, kFloatRoundoff);
+  EXPECT_NEAR(y.at(0, 0, 2), b, kFloatRoundoff);
 }
 
 TEST(Relight, SameResultForAnyThreadCount) {
@@ -140,15 +157,15 @@ TEST(CompareImages, KnownOffsetAndMask) {
     for (int c = 0; c < 3; ++c) b.at(x, 1, c) = 0.6f;  // bottom row off by 0.1
   const ImageComparison half = compare_images(a.view(), b.view());
   // MSE = 0.01 over half the pixels: 0.005, PSNR = 10 log10(1 / 0.005) = 23.01 dB.
-  EXPECT_NEAR(half.psnr_db, 10.0 * std::log10(1.0 / 0.005), 1e-3);
-  EXPECT_NEAR(half.mean_abs_grey, 0.05 * 255.0, 1e-3);
-  EXPECT_NEAR(half.max_abs, 0.1, 1e-6);
+  EXPECT_NEAR(half.psnr_db, 10.0 * std::log10(1.0 / 0.005), kFloatMetricTol);
+  EXPECT_NEAR(half.mean_abs_grey, 0.05 * 255.0, kFloatMetricTol);
+  EXPECT_NEAR(half.max_abs, 0.1, kFloatRoundoff);
   Image mask(4, 2, 1, ColourSpace::kLinear, 0.0f);
   for (int x = 0; x < 4; ++x) mask.at(x, 1, 0) = 1.0f;
   const ConstImageViewF mv = mask.view();
   const ImageComparison masked = compare_images(a.view(), b.view(), &mv);
   EXPECT_EQ(masked.pixels, 4u);
-  EXPECT_NEAR(masked.psnr_db, 20.0, 1e-3);
+  EXPECT_NEAR(masked.psnr_db, 20.0, kFloatMetricTol);
   const Image empty_mask(4, 2, 1);
   const ConstImageViewF ev = empty_mask.view();
   EXPECT_THROW((void)compare_images(a.view(), b.view(), &ev), Error);
@@ -163,7 +180,7 @@ TEST(CompareImages, GreyReferenceUsesLumaAndMismatchesAreErrors) {
       rgb.at(x, y, 2) = 0.2f;
     }
   const Image grey(2, 2, 1, ColourSpace::kSRGB, static_cast<float>(luma(0.8f, 0.4f, 0.2f)));
-  EXPECT_GT(compare_images(rgb.view(), grey.view()).psnr_db, 120.0);
+  EXPECT_GT(compare_images(rgb.view(), grey.view()).psnr_db, kRoundingOnlyPsnrDb);
   EXPECT_THROW((void)compare_images(rgb.view(), Image(3, 2, 3, ColourSpace::kSRGB).view()), Error);
   EXPECT_THROW((void)compare_images(rgb.view(), Image(2, 2, 3, ColourSpace::kLinear).view()),
                Error);
@@ -207,10 +224,8 @@ TEST(RelightSet, WritesImagesAndComparesWithExistingPhotos) {
   ASSERT_EQ(report.entries.size(), 3u);
   EXPECT_EQ(report.compared, 2u);
   EXPECT_FALSE(report.entries[2].compared);
-  // 8-bit rounding only: RMS 1/sqrt(12) grey levels, about 59 dB.
-  constexpr double kEightBitPsnrDb = 55.0;
   EXPECT_GT(report.mean_psnr_db, kEightBitPsnrDb);
-  EXPECT_LT(report.mean_abs_grey, 0.5);
+  EXPECT_LT(report.mean_abs_grey, kEightBitMeanAbsGrey);
   EXPECT_EQ(test::list_files(options.out_dir),
             (std::vector<std::string>{"photo0.png", "photo1.png", "photo2.png"}));
   EXPECT_TRUE(fs::exists(options.report_json));

@@ -10,6 +10,7 @@
 #include <Eigen/Cholesky>
 
 #include "synth_stack.h"
+#include "tolerances.h"
 
 namespace ptmkit::fit {
 namespace {
@@ -60,7 +61,7 @@ TEST(RobustLobe, QuantileTrimLabelsTheDarkestQuarterAndBrightestTenth) {
   // The coefficients are the least-squares polynomial of the kept samples.
   double check[6];
   ASSERT_TRUE(ts.weighted_fit(value.data(), w.data(), check));
-  for (int k = 0; k < 6; ++k) EXPECT_NEAR(c[k], check[k], 1e-12);
+  for (int k = 0; k < 6; ++k) EXPECT_NEAR(c[k], check[k], test::kDoubleRoundoff);
 }
 
 // Degenerate input: every sample clipped leaves nothing to fit; qtrim falls back to least
@@ -77,7 +78,7 @@ TEST(RobustLobe, QuantileTrimFallsBackWhenEverySampleIsClipped) {
   const TexelOutcome out = ts.solve(value.data(), sat.data(), w.data(), labels.data(), c);
   EXPECT_TRUE(out.fallback);
   for (double ck : c) EXPECT_TRUE(std::isfinite(ck));
-  EXPECT_NEAR(c[5], 1.0, 1e-9);  // the constant term of a flat texel
+  EXPECT_NEAR(c[5], 1.0, test::kDoubleSolveRoundoff);  // the constant term of a flat texel
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "ptmkit/core/light_layout.h"
 #include "synth_stack.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 using ::testing::HasSubstr;
 
@@ -20,6 +21,29 @@ namespace ptmkit::fit {
 namespace {
 
 constexpr int kSize = 64;  // pixels: the presets' relief scaled down, same scene
+
+// Outlier labels over lit samples: precision >= 0.8 and recall >= 0.6, the requirement
+// (docs/TARGETS.md); measured at 64 px: precision 0.86-0.97, recall 0.78-1.00.
+constexpr double kOutlierPrecisionTarget = 0.8;
+constexpr double kOutlierRecallTarget = 0.6;
+// QR and SVD against Cholesky on dome49: cond(A^T A) = 28, so they agree to about 1e-15 x 28
+// relative.
+constexpr double kPinvMethodsAgreeTol = 1e-12;
+// The Ceres losses over least squares on the glossy preset at 24 px: measured +1.8 to +2.9 dB.
+constexpr double kCeresMinGainDb = 1.0;
+// Normals of the command's robust fit (32 px glossy capture, 16-bit PNG) against the truth:
+// measured mean 0.36 degrees.
+constexpr double kCliNormalsMeanTolDeg = 2.0;
+// Readmission's gain in label precision: measured 0.52 to 0.78 (+0.26).
+constexpr double kReadmitPrecisionGain = 0.1;
+// Recall with readmission: measured 0.61.
+constexpr double kReadmitMinRecall = 0.5;
+// Filling rejected samples with the Lambertian model: measured +1.35 dB truth PSNR.
+constexpr double kFillGainDb = 0.5;
+// Keeping samples close to the Lambertian model: label precision measured 0.96 against 0.56.
+constexpr double kKeepPrecisionGain = 0.2;
+// The price of keeping: the kept samples' deviations go into the fit, measured -0.52 dB.
+constexpr double kKeepPsnrCostDb = 1.0;
 
 struct PresetCase {
   const char* preset;
@@ -43,12 +67,11 @@ TEST_P(RobustPresets, BeatsLeastSquaresOnTheDiffuseTruthAndOnNormals) {
   EXPECT_GE(robust.psnr_db - ls.psnr_db, c.min_gain_db) << c.preset;
   // Normals from the inliers beat normals from every sample (required on every preset).
   EXPECT_LT(robust.normals.mean_deg, ls.normals.mean_deg) << c.preset;
-  // Samples more than 20 grey levels off the truth, labelled (required: precision >= 0.8,
-  // recall >= 0.6; measured at 64 px: precision 0.86-0.97, recall 0.78-1.00).
+  // Samples more than 20 grey levels off the truth, labelled.
   if (robust.outliers_lit.true_outliers > 0) {
-    EXPECT_GE(robust.outliers_lit.recall, 0.6) << c.preset;
+    EXPECT_GE(robust.outliers_lit.recall, kOutlierRecallTarget) << c.preset;
   }
-  EXPECT_GE(robust.outliers_lit.precision, 0.8) << c.preset;
+  EXPECT_GE(robust.outliers_lit.precision, kOutlierPrecisionTarget) << c.preset;
   EXPECT_EQ(robust.report.outliers.samples, static_cast<std::uint64_t>(kSize * kSize * 49));
   EXPECT_GT(robust.report.outliers.shadows, 0u);
 }
@@ -112,7 +135,9 @@ TEST(RobustSolver, SignRuleRecoversAPolynomialUnderInjectedOutliers) {
     EXPECT_EQ(out.shadows, 2);
     EXPECT_EQ(out.highlights, 2);
     // Exact data: only rounding remains.
-    for (int k = 0; k < 6; ++k) EXPECT_NEAR(c[k], truth[k], 1e-9) << "trial " << trial;
+    for (int k = 0; k < 6; ++k) {
+      EXPECT_NEAR(c[k], truth[k], test::kDoubleSolveRoundoff) << "trial " << trial;
+    }
   }
 }
 
@@ -123,8 +148,8 @@ TEST(RobustSolver, QrAndSvdAgreeWithCholeskyOnAWellConditionedDome) {
     DesignOptions o;
     o.method = m;
     const LightDesign other = LightDesign::build(dirs, o);
-    // cond(A^T A) = 28 here: both agree to about 1e-15 * 28 relative.
-    EXPECT_LT((other.pseudo_inverse() - chol.pseudo_inverse()).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_LT((other.pseudo_inverse() - chol.pseudo_inverse()).cwiseAbs().maxCoeff(),
+              kPinvMethodsAgreeTol);
   }
 }
 
@@ -161,8 +186,8 @@ TEST(RobustSolver, CeresVariantsRejectOutliersToo) {
   const auto ls = test::score_solver(stack, Solver::kLS);
   for (Solver s : {Solver::kCeresHuber, Solver::kCeresCauchy, Solver::kCeresTukey}) {
     const auto r = test::score_solver(stack, s);
-    // Measured +2.2 to +3.0 dB at 96 px: symmetric losses help on highlights.
-    EXPECT_GT(r.psnr_db - ls.psnr_db, 1.0) << to_string(s);
+    // Symmetric losses help on highlights.
+    EXPECT_GT(r.psnr_db - ls.psnr_db, kCeresMinGainDb) << to_string(s);
     EXPECT_GT(r.report.outliers.ceres_texels, 0u);
   }
 }
@@ -192,15 +217,16 @@ TEST(RobustSolver, AllModelsAndDarkOrSaturatedTexelsStayFinite) {
     for (float v : map.colour) ASSERT_TRUE(std::isfinite(v));
     float rgb[3];
     map.evaluate(0, 0, 0.3, 0.2, rgb);
-    EXPECT_NEAR(rgb[0], 0.0f, 1e-6f);  // black stays black
+    EXPECT_NEAR(rgb[0], 0.0f, static_cast<float>(test::kFloatRoundoff));  // black stays black
     map.evaluate(1, 0, 0.3, 0.2, rgb);
-    EXPECT_NEAR(rgb[0], 1.0f, 1e-5f);  // saturated everywhere: kept (min_inliers), fits 1
+    // Saturated everywhere: kept (min_inliers), fits 1.
+    EXPECT_NEAR(rgb[0], 1.0f, static_cast<float>(test::kFloatSumRoundoff));
     EXPECT_GT(rep.outliers.fallback_texels + rep.outliers.highlights, 0u);
     EXPECT_EQ(out.normals.width(), 16);
     EXPECT_NEAR(out.normals.at(5, 5, 0) * out.normals.at(5, 5, 0) +
                     out.normals.at(5, 5, 1) * out.normals.at(5, 5, 1) +
                     out.normals.at(5, 5, 2) * out.normals.at(5, 5, 2),
-                1.0, 1e-5);
+                1.0, test::kFloatSumRoundoff);
   }
 }
 
@@ -230,7 +256,7 @@ TEST(RobustCli, FitsWithTheRobustSolverAndWritesMapsAndReport) {
   Image est = n, tru = truth;
   for (std::size_t i = 0; i < est.size(); ++i) est.data()[i] = 2 * est.data()[i] - 1;
   for (std::size_t i = 0; i < tru.size(); ++i) tru.data()[i] = 2 * tru.data()[i] - 1;
-  EXPECT_LT(eval::normal_error(est, tru).mean_deg, 2.0);
+  EXPECT_LT(eval::normal_error(est, tru).mean_deg, kCliNormalsMeanTolDeg);
 
   const auto bad = test::run_ptmkit({"fit", (dir.path() / "cap" / "lights.lp").string(), "-o",
                                      (dir / "o2.ptm").string(), "--solver", "nope"});
@@ -261,9 +287,9 @@ TEST(RobustSolver, ReadmissionRaisesLabelPrecision) {
   const auto off = test::score_solver(stack, Solver::kRobust, base);
   const auto on = test::score_solver(stack, Solver::kRobust, readmit);
   ASSERT_GT(on.outliers_lit.true_outliers, 0u);
-  EXPECT_GT(on.outliers_lit.precision, off.outliers_lit.precision + 0.1);
+  EXPECT_GT(on.outliers_lit.precision, off.outliers_lit.precision + kReadmitPrecisionGain);
   EXPECT_LT(on.outliers_lit.labelled, off.outliers_lit.labelled);
-  EXPECT_GE(on.outliers_lit.recall, 0.5);
+  EXPECT_GE(on.outliers_lit.recall, kReadmitMinRecall);
   RobustOptions bad;
   bad.readmit_k = -1.0;
   EXPECT_FALSE(bad.validate().empty());
@@ -284,15 +310,14 @@ TEST(RobustSolver, FillingAndKeepingCloseSamplesEachEarnTheirPlace) {
   RobustOptions no_fill;
   no_fill.fill_rejected = false;
   const auto unfilled = test::score_solver(stack, Solver::kRobust, no_fill);
-  EXPECT_GT(both.psnr_db, unfilled.psnr_db + 0.5);  // measured +1.35 dB
+  EXPECT_GT(both.psnr_db, unfilled.psnr_db + kFillGainDb);
   RobustOptions no_keep;
   no_keep.keep_within = 0.0;
   const auto unkept = test::score_solver(stack, Solver::kRobust, no_keep);
-  // Measured precision 0.96 against 0.56, recall 0.89 against 0.93.
-  EXPECT_GT(both.outliers_lit.precision, unkept.outliers_lit.precision + 0.2);
-  EXPECT_GE(both.outliers_lit.recall, 0.6);
-  // The price of keeping: the kept samples' deviations go into the fit (measured -0.52 dB).
-  EXPECT_GT(both.psnr_db, unkept.psnr_db - 1.0);
+  // Measured recall 0.89 against 0.93 without keeping.
+  EXPECT_GT(both.outliers_lit.precision, unkept.outliers_lit.precision + kKeepPrecisionGain);
+  EXPECT_GE(both.outliers_lit.recall, kOutlierRecallTarget);
+  EXPECT_GT(both.psnr_db, unkept.psnr_db - kKeepPsnrCostDb);
   RobustOptions bad;
   bad.keep_within = -1.0;
   EXPECT_FALSE(bad.validate().empty());

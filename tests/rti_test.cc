@@ -15,11 +15,20 @@
 #include "ptmkit/texture/relight.h"
 #include "ptmkit/texture/rti.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace ptmkit {
 namespace {
 
+using test::kFloatRoundoff;
+using test::kFloatSumRoundoff;
+using test::kHalf8BitStep;
 using test::ScratchDir;
+
+// The closed forms of the basis against the general definition: both sides are a few dozen
+// double operations on values of order 1, so agreement to this is rounding; a wrong constant,
+// power or sign is off by far more.
+constexpr double kBasisRoundingTol = 1e-12;
 
 CoefficientMap random_map(int w, int h, int terms, std::uint64_t seed) {
   const Basis basis = terms == 4 ? Basis::kHsh2 : terms == 9 ? Basis::kHsh3 : Basis::kHsh4;
@@ -65,9 +74,6 @@ double hsh_reference(int index, double theta, double phi) {
 }
 
 TEST(RtiBasis, ClosedFormsMatchTheGeneralDefinition) {
-  // Both sides are a few dozen double operations on values of order 1: agreement to 1e-12 is
-  // rounding; a wrong constant, power or sign is off by far more.
-  constexpr double kRoundingTol = 1e-12;
   // Below the viewers' clamp of theta (pi/2 - 0.04), where the closed forms are unclamped.
   constexpr double kMaxThetaRad = std::numbers::pi / 2 - 0.05;
   std::mt19937_64 rng(test::test_seed());
@@ -80,7 +86,7 @@ TEST(RtiBasis, ClosedFormsMatchTheGeneralDefinition) {
     double h[16];
     hsh_basis(16, d, h);
     for (int k = 0; k < 16; ++k)
-      EXPECT_NEAR(h[k], hsh_reference(k, theta, phi), kRoundingTol) << "term " << k;
+      EXPECT_NEAR(h[k], hsh_reference(k, theta, phi), kBasisRoundingTol) << "term " << k;
     // Fewer terms are a prefix of the 16.
     double h4[4], h9[9];
     hsh_basis(4, d, h4);
@@ -99,8 +105,8 @@ TEST(RtiBasis, ClosedFormsMatchTheGeneralDefinition) {
                               std::cos(clamp)),
               edge);
     for (int k = 0; k < 16; ++k) {
-      EXPECT_NEAR(at[k], edge[k], kRoundingTol) << "term " << k;
-      EXPECT_NEAR(below[k], edge[k], kRoundingTol) << "term " << k;
+      EXPECT_NEAR(at[k], edge[k], kBasisRoundingTol) << "term " << k;
+      EXPECT_NEAR(below[k], edge[k], kBasisRoundingTol) << "term " << k;
     }
   }
   // The fit evaluates the .rti basis (the viewers' order): a basis name maps to its terms.
@@ -115,11 +121,11 @@ TEST(RtiBasis, ClosedFormsMatchTheGeneralDefinition) {
   double h[16];
   texture::hsh_basis(16, Eigen::Vector3d(0, 0, 1), h);
   const double pi = 3.14159265358979323846;
-  EXPECT_NEAR(h[0], 1 / std::sqrt(2 * pi), 1e-12);
-  EXPECT_NEAR(h[1], 0.0, 1e-12);
-  EXPECT_NEAR(h[2], std::sqrt(3 / (2 * pi)), 1e-12);
-  EXPECT_NEAR(h[6], std::sqrt(5 / (2 * pi)), 1e-12);
-  EXPECT_NEAR(h[12], std::sqrt(7 / (2 * pi)), 1e-12);
+  EXPECT_NEAR(h[0], 1 / std::sqrt(2 * pi), kBasisRoundingTol);
+  EXPECT_NEAR(h[1], 0.0, kBasisRoundingTol);
+  EXPECT_NEAR(h[2], std::sqrt(3 / (2 * pi)), kBasisRoundingTol);
+  EXPECT_NEAR(h[6], std::sqrt(5 / (2 * pi)), kBasisRoundingTol);
+  EXPECT_NEAR(h[12], std::sqrt(7 / (2 * pi)), kBasisRoundingTol);
 }
 
 TEST(RtiFile, WriteReadRoundTrip) {
@@ -141,8 +147,8 @@ TEST(RtiFile, WriteReadRoundTrip) {
     for (std::size_t i = 0; i < m.coeffs.size(); ++i) {
       max_err = std::max(max_err, static_cast<double>(std::abs(r.coeffs[i] - m.coeffs[i])));
     }
-    EXPECT_LE(max_err, 0.5 / 255.0 + 1e-6);
-    EXPECT_NEAR(max_err, rep.max_coeff_error, 1e-6);
+    EXPECT_LE(max_err, kHalf8BitStep + kFloatRoundoff);
+    EXPECT_NEAR(max_err, rep.max_coeff_error, kFloatRoundoff);
     // Writing what was read gives the same bytes (the quantisation is reproduced exactly).
     const auto again = dir / "again.rti";
     texture::write_rti(again, r);
@@ -211,7 +217,7 @@ TEST(RtiRelight, MatchesTheBasisSumAndTheCli) {
       for (int k = 0; k < 3; ++k) {
         double v = 0.0;
         for (int j = 0; j < 9; ++j) v += r.texel_coeffs(x, y)[k * 9 + j] * b[j];
-        EXPECT_NEAR(img.at(x, y, k), v, 1e-5);
+        EXPECT_NEAR(img.at(x, y, k), v, kFloatSumRoundoff);
       }
     }
   }
@@ -239,8 +245,8 @@ TEST(RtiRelight, MatchesTheBasisSumAndTheCli) {
       lo = std::min(lo, r.coeffs[i]);
       hi = std::max(hi, r.coeffs[i]);
     }
-    EXPECT_NEAR(j["coeff_min"][static_cast<std::size_t>(k)].get<double>(), lo, 1e-6);
-    EXPECT_NEAR(j["coeff_max"][static_cast<std::size_t>(k)].get<double>(), hi, 1e-6);
+    EXPECT_NEAR(j["coeff_min"][static_cast<std::size_t>(k)].get<double>(), lo, kFloatRoundoff);
+    EXPECT_NEAR(j["coeff_max"][static_cast<std::size_t>(k)].get<double>(), hi, kFloatRoundoff);
   }
   const test::RunResult text = test::run_ptmkit({"info", path.string()});
   EXPECT_EQ(text.exit_code, 0) << text.err;

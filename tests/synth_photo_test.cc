@@ -12,6 +12,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/parallel.h"
 #include "ptmkit/synth/photo.h"
+#include "tolerances.h"
 
 namespace {
 
@@ -21,6 +22,52 @@ using ptmkit::synth::PhotoRenderer;
 using ptmkit::synth::PhotoTruth;
 using V2 = Eigen::Vector2d;
 using V3 = Eigen::Vector3d;
+using ptmkit::test::kDoubleSolveRoundoff;
+
+// The outline's axis angle from the conic in double, in degrees: rounding only.
+constexpr double kAngleRoundoffDeg = 1e-6;
+// A sphere 150 mm off the axis at 400 mm (f = 1000 px): its outline is longer along the line
+// from the principal point (measured 3.4 px) and its centre lies beyond the centre's
+// projection (measured 0.94 px).
+constexpr double kOffAxisElongationPx = 0.5;
+constexpr double kOffAxisCentreShiftPx = 0.5;
+// A mask sampled at pixel centres against the ellipse: 1% of the area is a fifth of a pixel
+// along the perimeter (~260 px); measured 0.05%.
+constexpr double kMaskAreaRelTol = 0.01;
+// The mask's centroid against the ellipse's centre: measured 0.021 px.
+constexpr double kMaskCentroidTolPx = 0.05;
+// The light's image is a disc about 0.2 px across, sampled every 1/16 px: its centroid is
+// within about a sample spacing of the mirror point (measured 0.051 px).
+constexpr double kMirrorPointTolPx = 0.07;
+// The centroid of a highlight's saturated core against the mirror point: measured 0.080 px in
+// chrome photographs with every artefact on, 0.25 px on the large sphere with flare.
+constexpr double kPhotoCoreTolPx = 0.3;
+// The flare shows: it changes some value by more than this (measured 0.18 or more).
+constexpr double kFlareVisible = 0.1;
+// The flare's streaks move the core's centroid by less than this: measured 0.006 px.
+constexpr double kFlareCoreShiftPx = 0.05;
+// The corners' loss of light against vignetting_corner_loss, averaged over a 12 x 12 patch:
+// measured 0.029.
+constexpr double kVignettingLossTol = 0.05;
+// A pixel counts as changed by a switch when it moves by more than 2.5 grey levels (every
+// switch changes 455 pixels or more so, against the 20 required).
+constexpr float kChangedPixel = 2.5f / 255.0f;
+// The surface reflection of the light on glass is plainly there: half of full scale or more
+// (measured 1.96 or more).
+constexpr double kVisibleReflection = 0.5;
+// Linear full scale: brighter values clip in the photograph.
+constexpr double kClipLevel = 1.0;
+// The coin's glint changes a pixel by half of full scale or more (measured 1.27).
+constexpr double kCoinGlint = 0.5;
+// photo-large-sphere: one sphere of about 180 px radius (docs/CALIBRATION.md; measured
+// 180.4 px), cut by the top edge (measured 0.81 of its outline inside the frame) and
+// hidden by its pedestal below (measured 0.62 visible).
+constexpr double kLargeSphereMinRadiusPx = 150.0;
+constexpr double kLargeSphereMaxInsideFrame = 0.97;
+constexpr double kPedestalMinHidden = 0.05;
+constexpr double kLargeSphereMinVisible = 0.5;
+// The coin at 320 x 180 px: measured radius 19.2 px.
+constexpr double kSmallCoinMinRadiusPx = 5.0;
 
 PhotoOptions small(const char* preset, const char* lights) {
   PhotoOptions o = ptmkit::synth::photo_preset_options(preset);
@@ -71,16 +118,16 @@ TEST(SynthPhoto, OutlineOfASphereOnTheAxisIsItsCircle) {
   const V2 pp(319.5, 179.5);
   const auto on = ptmkit::synth::sphere_outline(V3(0, 0, 400), 20.0, 1000.0, pp);
   const double r = 1000.0 * 20.0 / std::sqrt(400.0 * 400.0 - 20.0 * 20.0);
-  EXPECT_NEAR(on.semi_major_px, r, 1e-9);
-  EXPECT_NEAR(on.semi_minor_px, r, 1e-9);
-  EXPECT_NEAR((on.centre_px - pp).norm(), 0.0, 1e-9);
+  EXPECT_NEAR(on.semi_major_px, r, kDoubleSolveRoundoff);
+  EXPECT_NEAR(on.semi_minor_px, r, kDoubleSolveRoundoff);
+  EXPECT_NEAR((on.centre_px - pp).norm(), 0.0, kDoubleSolveRoundoff);
   // Off the axis: an ellipse elongated along the line from the principal point, its centre
   // beyond the centre's projection.
   const auto off = ptmkit::synth::sphere_outline(V3(150, 0, 400), 20.0, 1000.0, pp);
-  EXPECT_GT(off.semi_major_px, off.semi_minor_px + 0.5);
-  EXPECT_NEAR(std::min(off.angle_deg, 180.0 - off.angle_deg), 0.0, 1e-6);
-  EXPECT_GT(off.centre_px.x(), off.centre_projection_px.x() + 0.5);
-  EXPECT_NEAR(off.centre_px.y(), pp.y(), 1e-9);
+  EXPECT_GT(off.semi_major_px, off.semi_minor_px + kOffAxisElongationPx);
+  EXPECT_NEAR(std::min(off.angle_deg, 180.0 - off.angle_deg), 0.0, kAngleRoundoffDeg);
+  EXPECT_GT(off.centre_px.x(), off.centre_projection_px.x() + kOffAxisCentreShiftPx);
+  EXPECT_NEAR(off.centre_px.y(), pp.y(), kDoubleSolveRoundoff);
 }
 
 TEST(SynthPhoto, MasksMatchTheTruthOutline) {
@@ -103,12 +150,10 @@ TEST(SynthPhoto, MasksMatchTheTruthOutline) {
         my += y;
       }
     }
-    // Pixel-centre sampling of an ellipse: area and centroid within a fraction of a pixel's
-    // worth of the boundary (perimeter ~ 260 px).
     const double area = std::numbers::pi * t.outline.semi_major_px * t.outline.semi_minor_px;
-    EXPECT_NEAR(n, area, 0.01 * area);
-    EXPECT_NEAR(mx / n, t.outline.centre_px.x(), 0.05);
-    EXPECT_NEAR(my / n, t.outline.centre_px.y(), 0.05);
+    EXPECT_NEAR(n, area, kMaskAreaRelTol * area);
+    EXPECT_NEAR(mx / n, t.outline.centre_px.x(), kMaskCentroidTolPx);
+    EXPECT_NEAR(my / n, t.outline.centre_px.y(), kMaskCentroidTolPx);
   }
 }
 
@@ -173,14 +218,12 @@ TEST(SynthPhoto, ChromeHighlightsLieWhereMirrorGeometryPutsThem) {
       const auto j = static_cast<std::size_t>((i / 4) * 4 + (i % 4 + 2) % 4);
       const Image& other = radiance[j];
       const V2 c = difference_centroid(radiance[static_cast<std::size_t>(i)], other, mask);
-      // The light's image is a disc about 0.2 px across, sampled every 1/16 px: its centroid
-      // is within about a sample spacing of the mirror point.
-      EXPECT_NEAR(c.x(), hl->x(), 0.07) << "sphere " << k << " light " << i;
-      EXPECT_NEAR(c.y(), hl->y(), 0.07) << "sphere " << k << " light " << i;
+      EXPECT_NEAR(c.x(), hl->x(), kMirrorPointTolPx) << "sphere " << k << " light " << i;
+      EXPECT_NEAR(c.y(), hl->y(), kMirrorPointTolPx) << "sphere " << k << " light " << i;
       // The photographs, every artefact on (bloom, flare, vignetting, noise, clipping, sRGB):
       // the saturated core.
       const V2 p = core_centroid(photo[static_cast<std::size_t>(i)], &photo[j], *hl, 9, true);
-      EXPECT_NEAR((p - *hl).norm(), 0.0, 0.3) << "sphere " << k << " light " << i;
+      EXPECT_NEAR((p - *hl).norm(), 0.0, kPhotoCoreTolPx) << "sphere " << k << " light " << i;
       ++checked;
     }
   }
@@ -198,11 +241,11 @@ TEST(SynthPhoto, FlareDoesNotMoveTheBrightestCore) {
     const auto& hl = with.truth().spheres[0].highlight_px[static_cast<std::size_t>(i)];
     if (!hl) continue;
     const Image a = with.render_radiance(i), b = without.render_radiance(i);
-    EXPECT_GT(max_abs_difference(a, b), 0.1) << "the flare shows";
+    EXPECT_GT(max_abs_difference(a, b), kFlareVisible) << "the flare shows";
     // Centroid of the light above half of the core's peak, with and without the streaks.
     auto centroid = [&](const Image& im) { return core_centroid(im, nullptr, *hl, 3, false); };
-    EXPECT_LT((centroid(a) - centroid(b)).norm(), 0.05) << "light " << i;
-    EXPECT_LT((centroid(a) - *hl).norm(), 0.3) << "light " << i;
+    EXPECT_LT((centroid(a) - centroid(b)).norm(), kFlareCoreShiftPx) << "light " << i;
+    EXPECT_LT((centroid(a) - *hl).norm(), kPhotoCoreTolPx) << "light " << i;
     ++checked;
   }
   EXPECT_GE(checked, 3);
@@ -230,7 +273,7 @@ TEST(SynthPhoto, VignettingOffKeepsTheCentre) {
       sb += ptmkit::srgb_to_linear(b.at(x, y, 1));
     }
   }
-  EXPECT_NEAR(sa / sb, 1.0 - o.artefacts.vignetting_corner_loss, 0.05);
+  EXPECT_NEAR(sa / sb, 1.0 - o.artefacts.vignetting_corner_loss, kVignettingLossTol);
 }
 
 TEST(SynthPhoto, EveryArtefactSwitchChangesTheImage) {
@@ -270,7 +313,7 @@ TEST(SynthPhoto, EveryArtefactSwitchChangesTheImage) {
     const Image im = PhotoRenderer(o).render(0);
     int changed = 0;
     for (std::size_t i = 0; i < static_cast<std::size_t>(im.width()) * im.height() * 3; ++i) {
-      if (std::abs(im.data()[i] - reference.data()[i]) > 2.5f / 255.0f) ++changed;
+      if (std::abs(im.data()[i] - reference.data()[i]) > kChangedPixel) ++changed;
     }
     EXPECT_GT(changed, 20) << c.name;
   }
@@ -358,11 +401,12 @@ TEST(SynthPhoto, GlassShowsAHotSpotThatIsNoMirrorReflection) {
           if (dist < 2.0) mirror_peak = std::max(mirror_peak, d);
         }
       }
-      EXPECT_GT(mirror_peak, 0.5) << "the surface reflection, sphere " << k << " light " << i;
+      EXPECT_GT(mirror_peak, kVisibleReflection)
+          << "the surface reflection, sphere " << k << " light " << i;
       // A spot away from the mirror point that saturates the sensor, as the reflection does:
       // in the photograph both are clipped cores.
-      EXPECT_GT(mirror_peak, 1.0);
-      if (far_peak > 1.0) ++hot_spots;
+      EXPECT_GT(mirror_peak, kClipLevel);
+      if (far_peak > kClipLevel) ++hot_spots;
     }
   }
   EXPECT_GE(checked, 6);
@@ -375,7 +419,7 @@ TEST(SynthPhoto, TheCoinGlintsWithTheLight) {
   const PhotoOptions o = small("photo-dome", "rings:20:6");
   const PhotoRenderer renderer(o);
   const auto& t = renderer.truth();
-  ASSERT_GT(t.distractor_radius_px, 5.0);
+  ASSERT_GT(t.distractor_radius_px, kSmallCoinMinRadiusPx);
   double strongest = 0.0;
   for (int i = 0; i < 3; ++i) {
     const Image a = renderer.render_radiance(i), b = renderer.render_radiance(i + 3);
@@ -386,16 +430,16 @@ TEST(SynthPhoto, TheCoinGlintsWithTheLight) {
       }
     }
   }
-  EXPECT_GT(strongest, 0.5);
+  EXPECT_GT(strongest, kCoinGlint);
 }
 
 TEST(SynthPhoto, LargeSphereIsCutByTheFrameAndHiddenByItsBase) {
   const PhotoRenderer renderer(ptmkit::synth::photo_preset_options("photo-large-sphere"));
   const auto& t = renderer.truth().spheres[0];
-  EXPECT_GT(t.outline.radius_px, 150.0);
-  EXPECT_LT(t.outline_inside_frame, 0.97);
-  EXPECT_LT(t.outline_visible, t.outline_inside_frame - 0.05);
-  EXPECT_GT(t.outline_visible, 0.5);
+  EXPECT_GT(t.outline.radius_px, kLargeSphereMinRadiusPx);
+  EXPECT_LT(t.outline_inside_frame, kLargeSphereMaxInsideFrame);
+  EXPECT_LT(t.outline_visible, t.outline_inside_frame - kPedestalMinHidden);
+  EXPECT_GT(t.outline_visible, kLargeSphereMinVisible);
 }
 
 TEST(SynthPhoto, BadOptionsAreRefused) {

@@ -17,9 +17,37 @@
 #include "ptmkit/texture/ptm8.h"
 #include "ptmkit/texture/relight.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace ptmkit::texture {
 namespace {
+
+using test::kDoubleSolveRoundoff;
+
+// A float coefficient of order 1 in grey units (x 255): an ulp is 3e-5.
+constexpr double kFloatGreyRoundoff = 1e-4;
+// The derived bound is not vacuous: some sample comes within this factor of it (measured
+// 0.94).
+constexpr double kBoundTightnessRatio = 1.0 / 3.0;
+// What the integer arithmetic adds to the stored bytes' own error (light quantisation, group
+// alignment and two roundings: docs/INTEGER-MODEL.md section 3): measured +0.07 mean and +0.27
+// max grey levels on the rendered relief.
+constexpr double kArithmeticMeanAddGrey = 0.25;
+constexpr double kArithmeticMaxAddGrey = 2.0;
+// The requirement where the stored coefficients allow it (shifts >= -1): mean <= 1 and max
+// <= 4 grey levels (docs/TARGETS.md).
+constexpr double kIntegerTargetMeanGrey = 1.0;
+constexpr double kIntegerTargetMaxGrey = 4.0;
+// Steps of 4 grey levels: the stored bytes alone cost at least 0.5 mean (docs/INTEGER-MODEL.md
+// section 3; measured 1.08), so the target is out of reach ...
+constexpr double kCoarseStepFloorGrey = 0.5;
+// ... and the model stays near that floor: measured mean 1.14, max 5.2 grey levels
+// (docs/TEXTURE.md).
+constexpr double kCoarseStepMeanGrey = 1.5;
+constexpr double kCoarseStepMaxGrey = 8.0;
+// The paper's shifts with float evaluation on the 32 px relief: measured mean 1.15 grey levels
+// (docs/TEXTURE.md: 1.12).
+constexpr double kPaperShiftsMeanGrey = 2.0;
 
 // A fitted RGB map of a small rendered relief (the default preset, 48 x 48, dome49).
 CoefficientMap relief_map(int size, ColourModel model = ColourModel::kRGB) {
@@ -83,7 +111,8 @@ TEST(TextureInteger, QuantisedCoefficientsAreWithinHalfAStep) {
   for (std::size_t j = 0; j < map.coeffs.size(); ++j) {
     const int g = ptm8_group(static_cast<int>(j % kPtmTerms));
     EXPECT_LE(t.coeffs[j], 254);
-    EXPECT_LE(std::abs(255.0 * (map.coeffs[j] - back.coeffs[j])), 0.5 * t.step_grey(g) + 1e-4);
+    EXPECT_LE(std::abs(255.0 * (map.coeffs[j] - back.coeffs[j])),
+              0.5 * t.step_grey(g) + kFloatGreyRoundoff);
   }
 }
 
@@ -180,13 +209,13 @@ TEST(TextureInteger, ErrorStaysWithinTheDerivedBound) {
           }
           const double err = std::abs(rgb[c] - std::clamp(f, 0.0, 255.0));
           const double bound = integer_error_bound_grey(grey, t.shifts, l.x(), l.y());
-          ASSERT_LE(err, bound + 1e-9) << "texel " << x << "," << y << " light " << l.transpose();
+          ASSERT_LE(err, bound + kDoubleSolveRoundoff)
+              << "texel " << x << "," << y << " light " << l.transpose();
           worst_ratio = std::max(worst_ratio, err / bound);
         }
       }
   }
-  // The bound is not vacuous: some sample comes within a factor 3 of it.
-  EXPECT_GT(worst_ratio, 1.0 / 3.0);
+  EXPECT_GT(worst_ratio, kBoundTightnessRatio);
 }
 
 TEST(TextureInteger, ExtremesSaturateAndHorizonLightsClamp) {
@@ -242,20 +271,19 @@ TEST(TextureInteger, RenderedReliefErrorAgainstFloatRelighting) {
       "%.2f dB; exact evaluation of the same stored bytes mean %.3f max %.3f\n",
       q.shifts[0], q.shifts[1], q.shifts[2], r.mean_abs_grey, r.max_abs_grey, r.psnr_db,
       q.ptm8.mean_abs_grey, q.ptm8.max_abs_grey);
-  // The arithmetic adds little to what the stored bytes already lose (light quantisation and
-  // two roundings: docs/INTEGER-MODEL.md section 3).
-  EXPECT_LE(r.mean_abs_grey, q.ptm8.mean_abs_grey + 0.25);
-  EXPECT_LE(r.max_abs_grey, q.ptm8.max_abs_grey + 2.0);
+  // The arithmetic adds little to what the stored bytes already lose.
+  EXPECT_LE(r.mean_abs_grey, q.ptm8.mean_abs_grey + kArithmeticMeanAddGrey);
+  EXPECT_LE(r.max_abs_grey, q.ptm8.max_abs_grey + kArithmeticMaxAddGrey);
   const bool fine_steps = q.shifts[0] >= -1 && q.shifts[1] >= -1 && q.shifts[2] >= -1;
   if (fine_steps) {
-    EXPECT_LE(r.mean_abs_grey, 1.0);
-    EXPECT_LE(r.max_abs_grey, 4.0);
+    EXPECT_LE(r.mean_abs_grey, kIntegerTargetMeanGrey);
+    EXPECT_LE(r.max_abs_grey, kIntegerTargetMaxGrey);
   } else {
     // A step of 4 grey levels: exact arithmetic on the stored bytes already misses the target
     // (the floor documented in docs/INTEGER-MODEL.md), and the model stays near that floor.
-    EXPECT_GT(q.ptm8.mean_abs_grey, 0.5);
-    EXPECT_LE(r.mean_abs_grey, 1.5);
-    EXPECT_LE(r.max_abs_grey, 8.0);
+    EXPECT_GT(q.ptm8.mean_abs_grey, kCoarseStepFloorGrey);
+    EXPECT_LE(r.mean_abs_grey, kCoarseStepMeanGrey);
+    EXPECT_LE(r.max_abs_grey, kCoarseStepMaxGrey);
   }
 }
 
@@ -266,9 +294,9 @@ TEST(TextureInteger, BothSchemesAreReportedOnTheSameTexture) {
   EXPECT_GT(q.samples, 0u);
   // The .ptm per-coefficient scale is never coarser than a power-of-two shift of the same
   // range, so its error is the smaller one.
-  EXPECT_LE(q.ptm.mean_abs_grey, q.ptm8.mean_abs_grey + 1e-9);
-  EXPECT_LT(q.ptm8.mean_abs_grey, 2.0);
-  EXPECT_GE(q.integer.mean_abs_grey + 1e-9, 0.0);
+  EXPECT_LE(q.ptm.mean_abs_grey, q.ptm8.mean_abs_grey + kDoubleSolveRoundoff);
+  EXPECT_LT(q.ptm8.mean_abs_grey, kPaperShiftsMeanGrey);
+  EXPECT_GE(q.integer.mean_abs_grey + kDoubleSolveRoundoff, 0.0);
 }
 
 TEST(TextureInteger, RelightCliIntegerMatchesTheLibrary) {

@@ -7,6 +7,7 @@
 
 #include "ptmkit/texture/filtering.h"
 #include "test_util.h"
+#include "tolerances.h"
 
 namespace ptmkit::texture {
 namespace {
@@ -80,7 +81,7 @@ TEST(TextureSat, CoefficientsFromTheTableMatchTheAveragedBytes) {
       for (int x = 2; x < 5; ++x) s += k < 6 ? t.texel(x, y)[k] : t.texel_colour(x, y)[k - 6];
     const double m = s / 6.0;
     const double expect = k < 6 ? (m - 127.0) * t.step_grey(ptm8_group(k)) / 255.0 : m / 255.0;
-    EXPECT_NEAR(out[k], expect, 1e-6) << k;
+    EXPECT_NEAR(out[k], expect, test::kFloatRoundoff) << k;
   }
 }
 
