@@ -1,14 +1,24 @@
-// Circle fitting shared by the sphere finders (sphere.cc, sphere_stack.cc); not public.
+// Shared by the sphere finders (sphere_circle.cc, sphere.cc, the streamed sphere_stack*.cc):
+// circle fitting and refinement, a pixel's luma; not public.
 #pragma once
 
+#include <cstddef>
 #include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "ptmkit/calib/sphere.h"
+#include "ptmkit/core/colour.h"
+#include "ptmkit/core/image.h"
 
 namespace ptmkit::calib::detail {
+
+// Luma of pixel (x, y) of a colour image; the first channel of a grey one.
+inline double luma_at(ConstImageViewF img, int x, int y) {
+  const float* p = img.row(y) + static_cast<std::ptrdiff_t>(x) * img.channels;
+  return img.channels >= 3 ? luma(p[0], p[1], p[2]) : p[0];
+}
 
 // Geometric least-squares circle through points: algebraic (Kasa) start, Gauss-Newton on
 // |p - c| - r, then once more without points beyond 3 robust scales. Throws ptmkit::Error

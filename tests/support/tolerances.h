@@ -14,6 +14,9 @@ inline constexpr double kDoubleSolveRoundoff = 1e-9;
 inline constexpr double kFloatRoundoff = 1e-6;
 // Float sums of tens of products of order 1: about a hundred ulps of 1.2e-7.
 inline constexpr double kFloatSumRoundoff = 1e-5;
+// Relit images in grey levels: float relighting scaled by 255 (about 1.5e-5 a value), with
+// room for the evaluation's few operations.
+inline constexpr double kRelitGreySlack = 1e-3;
 // Half a step of an 8-bit encoding of [0, 1]: the most round-to-nearest moves a value.
 inline constexpr double kHalf8BitStep = 0.5 / 255.0;
 // Half a step of a 16-bit encoding of [0, 1].
