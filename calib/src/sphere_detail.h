@@ -1,5 +1,5 @@
 // Shared by the sphere finders (sphere_circle.cc, sphere.cc, the streamed sphere_stack*.cc):
-// circle fitting and refinement, a pixel's luma; not public.
+// circle fitting and refinement, a pixel's luma, drawings as images; not public.
 #pragma once
 
 #include <cstddef>
@@ -30,5 +30,8 @@ inline double luma_at(ConstImageViewF img, int x, int y) {
 // composite (CV_32F) within 15% of the radius, then a trimmed geometric circle fit; rays that
 // leave the image are skipped. Returns `rough` when fewer than 20 rays have an edge.
 [[nodiscard]] Circle refine_circle(const Circle& rough, const cv::Mat& composite);
+
+// An 8-bit BGR OpenCV drawing (an overlay, a plot) as an sRGB image.
+[[nodiscard]] Image from_bgr8(const cv::Mat& bgr);
 
 }  // namespace ptmkit::calib::detail

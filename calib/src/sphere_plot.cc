@@ -10,6 +10,7 @@
 
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/core/error.h"
+#include "sphere_detail.h"
 
 namespace ptmkit::calib {
 
@@ -24,17 +25,6 @@ cv::Mat to_bgr8(const Image& img) {
         const float v = img.at(x, y, img.channels() >= 3 ? 2 - c : 0);
         row[x][c] = static_cast<unsigned char>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f));
       }
-    }
-  }
-  return out;
-}
-
-Image from_bgr8(const cv::Mat& m) {
-  Image out(m.cols, m.rows, 3, ColourSpace::kSRGB);
-  for (int y = 0; y < m.rows; ++y) {
-    const auto* row = m.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < m.cols; ++x) {
-      for (int c = 0; c < 3; ++c) out.at(x, y, c) = static_cast<float>(row[x][2 - c]) / 255.0f;
     }
   }
   return out;
@@ -75,7 +65,7 @@ Image sphere_overlay(const Image& image, const SphereReport& report, std::size_t
   if (!l.found || l.outlier) text += " - " + l.flag;
   cv::putText(m, text, cv::Point(6, 18 + 16 * text_row), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1,
               cv::LINE_AA);
-  return from_bgr8(m);
+  return detail::from_bgr8(m);
 }
 
 Image light_polar_plot(const SphereReport& report, int size_px) {
@@ -114,7 +104,22 @@ Image light_polar_plot(const SphereReport& report, int size_px) {
   }
   cv::putText(m, "light directions (elevation rings 0/30/60, x right, y up)", cv::Point(6, 16),
               cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
-  return from_bgr8(m);
+  return detail::from_bgr8(m);
 }
+
+namespace detail {
+
+Image from_bgr8(const cv::Mat& m) {
+  Image out(m.cols, m.rows, 3, ColourSpace::kSRGB);
+  for (int y = 0; y < m.rows; ++y) {
+    const auto* row = m.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < m.cols; ++x) {
+      for (int c = 0; c < 3; ++c) out.at(x, y, c) = static_cast<float>(row[x][2 - c]) / 255.0f;
+    }
+  }
+  return out;
+}
+
+}  // namespace detail
 
 }  // namespace ptmkit::calib

@@ -502,14 +502,7 @@ Image candidates_overlay(const Image& image, const std::vector<SphereCandidate>&
     cv::putText(m, buf, p + cv::Point(4, -4), cv::FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
                 cv::LINE_AA);
   }
-  Image out(m.cols, m.rows, 3, ColourSpace::kSRGB);
-  for (int y = 0; y < m.rows; ++y) {
-    const auto* row = m.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < m.cols; ++x) {
-      for (int c = 0; c < 3; ++c) out.at(x, y, c) = static_cast<float>(row[x][2 - c]) / 255.0f;
-    }
-  }
-  return out;
+  return detail::from_bgr8(m);
 }
 
 }  // namespace ptmkit::calib
