@@ -28,44 +28,11 @@
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/fit/near_light.h"
 #include "ptmkit/synth/synth.h"
+#include "relit_error.h"
 
 using namespace ptmkit;
 
 namespace {
-
-struct RelightError {
-  double rms_grey = 0.0;
-  double psnr_db = 0.0;
-  double p99_grey = 0.0;
-};
-
-RelightError relight_error(const CoefficientMap& map, const std::vector<Image>& truth,
-                           const std::vector<Eigen::Vector3d>& dirs) {
-  double sum = 0.0;
-  std::vector<double> abs_err;
-  for (std::size_t k = 0; k < dirs.size(); ++k) {
-    for (int y = 0; y < map.height; ++y) {
-      for (int x = 0; x < map.width; ++x) {
-        float rgb[3];
-        map.evaluate(x, y, dirs[k].x(), dirs[k].y(), rgb);
-        for (int c = 0; c < 3; ++c) {
-          const double d = rgb[c] - truth[k].at(x, y, c);
-          sum += d * d;
-          abs_err.push_back(std::abs(d) * 255.0);
-        }
-      }
-    }
-  }
-  RelightError e;
-  const double mse = sum / static_cast<double>(abs_err.size());
-  e.rms_grey = 255.0 * std::sqrt(mse);
-  e.psnr_db = ptmkit::psnr_db(mse);
-  const auto p =
-      abs_err.begin() + static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(abs_err.size()));
-  std::nth_element(abs_err.begin(), p, abs_err.end());
-  e.p99_grey = *p;
-  return e;
-}
 
 double seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -181,7 +148,7 @@ int main(int argc, char** argv) {
     fo.residual_stats = false;
     CoefficientMapSink sink(&floor_map);
     (void)fit::fit_images(distant_images, dirs, fo, sink);
-    const RelightError e = relight_error(floor_map, truth, held);
+    const test::RelitError e = test::relit_error(floor_map, truth, held);
     std::printf("%-14s %10.3f %10.3f %10.2f   (same scene under distant lights, distant model)\n",
                 "floor", e.rms_grey, e.p99_grey, e.psnr_db);
   }
@@ -208,7 +175,7 @@ int main(int argc, char** argv) {
       best_fit = std::min(best_fit, rep.fit_seconds);
       best_total = std::min(best_total, rep.total_seconds);
     }
-    const RelightError e = relight_error(map, truth, held);
+    const test::RelitError e = test::relit_error(map, truth, held);
     // The light model's own share: relit difference from the floor fit (same lights).
     std::vector<Image> floor_relit;
     for (const auto& d : held) {
@@ -217,7 +184,7 @@ int main(int argc, char** argv) {
         for (int x = 0; x < size; ++x) floor_map.evaluate(x, y, d.x(), d.y(), &img.at(x, y, 0));
       floor_relit.push_back(std::move(img));
     }
-    const RelightError f = relight_error(map, floor_relit, held);
+    const test::RelitError f = test::relit_error(map, floor_relit, held);
     std::printf("%-14s %10.3f %10.3f %10.2f %12.4f %12.4f %14.3f\n", v.name, e.rms_grey, e.p99_grey,
                 e.psnr_db, best_fit, best_total, f.rms_grey);
     if (v.near && !v.falloff) near_map = map;

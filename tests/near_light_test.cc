@@ -16,6 +16,7 @@
 #include "ptmkit/core/plane.h"
 #include "ptmkit/fit/fit.h"
 #include "ptmkit/synth/synth.h"
+#include "relit_error.h"
 #include "test_util.h"
 #include "tolerances.h"
 
@@ -93,22 +94,7 @@ double max_coeff_error(const CoefficientMap& got, const CoefficientMap& truth) {
 // RMS difference in grey levels between a map relit at `dirs` and reference images.
 double relit_rms_grey(const CoefficientMap& map, const std::vector<Image>& ref,
                       const std::vector<Eigen::Vector3d>& dirs) {
-  double sum = 0.0;
-  std::size_t count = 0;
-  for (std::size_t k = 0; k < dirs.size(); ++k) {
-    for (int y = 0; y < map.height; ++y) {
-      for (int x = 0; x < map.width; ++x) {
-        float rgb[3];
-        map.evaluate(x, y, dirs[k].x(), dirs[k].y(), rgb);
-        for (int c = 0; c < 3; ++c) {
-          const double d = rgb[c] - ref[k].at(x, y, c);
-          sum += d * d;
-          ++count;
-        }
-      }
-    }
-  }
-  return 255.0 * std::sqrt(sum / static_cast<double>(count));
+  return test::relit_error(map, ref, dirs).rms_grey;
 }
 
 std::vector<Image> relit(const CoefficientMap& map, const std::vector<Eigen::Vector3d>& dirs) {

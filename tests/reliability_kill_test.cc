@@ -92,13 +92,17 @@ void kill_and_check(const fs::path& root, const std::vector<std::string>& names,
   EXPECT_TRUE(test::temporaries(root).empty());
 }
 
+// A 128 x 128 synthetic capture without truth; its light file, or "" if synth failed.
+std::string small_capture(const fs::path& cap) {
+  const auto r = test::run_ptmkit({"synth", "--out", cap.string(), "--size", "128", "--no-truth"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return r.exit_code == 0 ? (cap / "lights.lp").string() : std::string();
+}
+
 TEST(ReliabilityKill, FitOutputsAreOldOrNew) {
   test::ScratchDir dir;
-  const fs::path cap = dir / "cap";
-  ASSERT_EQ(
-      test::run_ptmkit({"synth", "--out", cap.string(), "--size", "128", "--no-truth"}).exit_code,
-      0);
-  const std::string lp = (cap / "lights.lp").string();
+  const std::string lp = small_capture(dir / "cap");
+  ASSERT_FALSE(lp.empty());
   const std::string ptm = (dir / "out.ptm").string();
   const std::string normals = (dir / "normals.png").string();
   kill_and_check(dir.path(), {"out.ptm", "normals.png"},
@@ -108,11 +112,8 @@ TEST(ReliabilityKill, FitOutputsAreOldOrNew) {
 
 TEST(ReliabilityKill, RelightOutDirImagesAreOldOrNew) {
   test::ScratchDir dir;
-  const fs::path cap = dir / "cap";
-  ASSERT_EQ(
-      test::run_ptmkit({"synth", "--out", cap.string(), "--size", "128", "--no-truth"}).exit_code,
-      0);
-  const std::string lp = (cap / "lights.lp").string();
+  const std::string lp = small_capture(dir / "cap");
+  ASSERT_FALSE(lp.empty());
   const std::string ptm = (dir / "a.ptm").string();
   ASSERT_EQ(test::run_ptmkit({"fit", lp, "-o", ptm}).exit_code, 0);
   const std::string out = (dir / "relit").string();
