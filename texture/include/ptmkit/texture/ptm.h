@@ -188,11 +188,13 @@ struct PtmWriteOptions {
   std::size_t report_max_texels = std::size_t{1} << 16;
   // PtmStreamWriter only: at most this many bytes of its half-float coefficients stay in
   // memory (whole rows, from the top); the rows beyond go to an unnamed temporary file in the
-  // output's folder (a 12-megapixel kRGB fit: 432 MB of coefficients, 240 MB of them spilled,
+  // output's folder (a 12-megapixel kRGB fit: 432 MB of coefficients, 365 MB of them spilled,
   // read back once by end()). The page cache still serves them when memory is free; the
   // process's own footprint stays bounded. Spilling only the excess rather than everything
-  // saved 0.4 s of a 2.4 s fit (docs/PERFORMANCE.md). 0: always in memory.
-  std::size_t spill_above_bytes = std::size_t{192} << 20;
+  // saved 0.4 s of a 2.4 s fit; 64 MiB rather than 192 MiB took a 12-megapixel fit's peak
+  // from 226 to 153 MiB (LRGB) and 255 to 127 MiB (RGB) at the same speed within the
+  // machine's noise (docs/PERFORMANCE.md). 0: always in memory.
+  std::size_t spill_above_bytes = std::size_t{64} << 20;
   // Whole-number scales (see choose_quantisation), for readers that truncate
   // (byte - bias) * scale to an integer. Off: the finest scales (the bytes fit has always
   // written).
