@@ -1,6 +1,4 @@
 // ptmkit calibrate dome: light files from dome geometry.
-#include <algorithm>
-#include <cctype>
 #include <cstdio>
 #include <memory>
 
@@ -91,33 +89,6 @@ void write_overlays(const SphereArgs& args, const std::vector<std::filesystem::p
   }
 }
 
-// A mask beside the photographs (`chrome.mask.png` next to `chrome.0.png`, ...) is easily
-// caught by a shell pattern; taken for a photograph it looks like a light filling the
-// sphere and spoils the search. A file named as a mask whose pixels are only black and one
-// other level is refused with what to do instead.
-void refuse_masks_among_photos(const std::vector<std::filesystem::path>& files) {
-  for (const std::filesystem::path& f : files) {
-    std::string stem = f.stem().string();
-    std::transform(stem.begin(), stem.end(), stem.begin(),
-                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    if (stem.find("mask") == std::string::npos) continue;
-    const Image img = read_image(f);
-    float other = 0.0f;
-    bool two_levels = true;
-    for (std::size_t i = 0; i < img.size() && two_levels; ++i) {
-      const float v = img.data()[i];
-      if (v == 0.0f) continue;
-      if (other == 0.0f) other = v;
-      two_levels = v == other;
-    }
-    if (two_levels) {
-      throw Error(f.string() +
-                  ": a mask (named so, only two levels), not a photograph: give it with "
-                  "--mask, or leave it out of the images");
-    }
-  }
-}
-
 void run_sphere(const SphereArgs& args) {
   calib::RigOptions options;
   options.detection = args.options;
@@ -140,7 +111,6 @@ void run_sphere(const SphereArgs& args) {
   }
   if (!args.plane.empty()) options.plane = read_plane_json(args.plane);
   std::vector<std::filesystem::path> files(args.images.begin(), args.images.end());
-  refuse_masks_among_photos(files);
   const ImageInfo first = probe_image(files.front());
   calib::CameraSource camera;
   camera.camera_json = args.camera;

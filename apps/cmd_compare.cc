@@ -96,7 +96,7 @@ void add_compare_command(CLI::App& root) {
       ->check(CLI::Range(1, 100));
   cmd->add_flag("!--no-ssim", args->options.ssim, "Skip the held-out SSIM");
   cmd->add_option("--band-rows", args->options.band_rows,
-                  "Rows read and fitted at a time (0 = as many as fit in about 256 MiB); the "
+                  "Rows read and fitted at a time (0 = as many as fit in about 64 MiB); the "
                   "scores do not depend on it")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);

@@ -245,6 +245,7 @@ TEST(ReliabilityCli, CalibrationNamesAMaskGivenAsAPhotograph) {
   Image mask(64, 48, 1, ColourSpace::kSRGB, 0.0f);
   for (int y = 10; y < 30; ++y)
     for (int x = 20; x < 40; ++x) mask.at(x, y, 0) = 1.0f;
+  for (int y = 10; y < 30; ++y) mask.at(40, y, 0) = 0.5f;  // an anti-aliased edge
   write_image(dir / "ball.0.png", photo.view());
   write_image(dir / "ball.1.png", photo.view());
   write_image(dir / "ball.mask.png", mask.view());

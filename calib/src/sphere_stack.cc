@@ -1,6 +1,7 @@
 #include "ptmkit/calib/sphere_stack.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -413,9 +414,41 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
 
 }  // namespace
 
+namespace {
+
+// A mask beside the photographs (`chrome.mask.png` next to `chrome.0.png`, ...) is easily
+// caught by a shell pattern; taken for a photograph it looks like a light filling the
+// sphere and spoils the search. A file named as a mask whose samples are black or white
+// (within 2% of either end) but for at most 1% of them - a saved mask's anti-aliased or
+// compressed edge - and white somewhere is refused with what to do instead.
+void refuse_masks_among_photos(const std::vector<fs::path>& files) {
+  for (const fs::path& f : files) {
+    std::string stem = f.stem().string();
+    std::transform(stem.begin(), stem.end(), stem.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    if (stem.find("mask") == std::string::npos) continue;
+    const Image img = read_image(f);
+    std::size_t white = 0;
+    std::size_t between = 0;
+    for (std::size_t i = 0; i < img.size(); ++i) {
+      const float v = img.data()[i];
+      white += v > 0.98f ? 1 : 0;
+      between += v >= 0.02f && v <= 0.98f ? 1 : 0;
+    }
+    if (white > 0 && between * 100 <= img.size()) {
+      throw Error(f.string() +
+                  ": a mask (named so, black and white), not a photograph: give it with "
+                  "--mask, or leave it out of the images");
+    }
+  }
+}
+
+}  // namespace
+
 StackCalibration calibrate_sphere_stack(const std::vector<fs::path>& files,
                                         const StackCalibrationOptions& options) {
   if (files.empty()) throw Error("sphere: no images");
+  refuse_masks_among_photos(files);
   const FileSource src(files);
   return run(src, files, options);
 }

@@ -49,9 +49,9 @@ class PngDecoder final : public Decoder {
   PngDecoder& operator=(const PngDecoder&) = delete;
 
   void open(std::uintmax_t file_bytes) {
-    check_chunk_lengths(file_bytes);
     file_ = std::fopen(path_.c_str(), "rb");
     if (file_ == nullptr) throw Error(where(path_) + ": cannot open image file");
+    check_chunk_lengths(file_bytes);
     png_ = png_create_read_struct(PNG_LIBPNG_VER_STRING, &messages_, on_error, on_warning);
     if (png_ == nullptr) throw Error(where(path_) + ": cannot start the PNG reader");
     info_ = png_create_info_struct(png_);
@@ -143,8 +143,7 @@ class PngDecoder final : public Decoder {
   // The image data (IDAT) is streamed, so a cut-short file still reaches libpng, which
   // reports it as damaged.
   void check_chunk_lengths(std::uintmax_t file_bytes) const {
-    std::FILE* f = std::fopen(path_.c_str(), "rb");
-    if (f == nullptr) throw Error(where(path_) + ": cannot open image file");
+    std::FILE* f = file_;
     std::uintmax_t pos = 8;
     std::string problem;
     while (pos + 8 <= file_bytes && std::fseek(f, static_cast<long>(pos), SEEK_SET) == 0) {
@@ -162,8 +161,8 @@ class PngDecoder final : public Decoder {
       }
       pos += 12 + static_cast<std::uintmax_t>(length);
     }
-    std::fclose(f);
     if (!problem.empty()) throw Error(where(path_) + ": not a readable PNG: " + problem);
+    if (std::fseek(f, 0, SEEK_SET) != 0) throw Error(where(path_) + ": cannot read image file");
   }
 
  private:

@@ -164,14 +164,14 @@ std::vector<Image> rows_of(const std::vector<Image>& images, int first, int coun
   return out;
 }
 
-// Rows of a capture held at a time: about 256 MiB of float samples over every stack read
+// Rows of a capture held at a time: about 64 MiB of float samples over every stack read
 // together (capture, test set, diffuse truth), at least 16 rows.
 int band_rows(int width, int height, int channels, std::size_t images) {
   const std::size_t per_row = static_cast<std::size_t>(width) * static_cast<std::size_t>(channels) *
                               sizeof(float) * std::max<std::size_t>(images, 1);
   const auto rows = static_cast<int>(
       std::min<std::size_t>(static_cast<std::size_t>(height),
-                            (std::size_t{256} << 20) / std::max<std::size_t>(per_row, 1)));
+                            (std::size_t{64} << 20) / std::max<std::size_t>(per_row, 1)));
   return std::min(height, std::max(rows, 16));
 }
 
@@ -274,14 +274,18 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
     cap.rows->move_to(lo, hi);
     if (test) test->rows->move_to(lo, hi);
     const std::vector<Image>& window = cap.rows->images();
-    const std::vector<Image> band = halo > 0 ? rows_of(window, y0 - lo, core) : window;
-    std::vector<Image> diffuse;
+    // The band's own rows: the window itself unless it carries SSIM rows around them.
+    std::vector<Image> trimmed;
+    if (lo != y0 || hi != y0 + core) trimmed = rows_of(window, y0 - lo, core);
+    const std::vector<Image>& band = trimmed.empty() ? window : trimmed;
+    static const std::vector<Image> kNone;
+    const std::vector<Image>* diffuse_rows = &kNone;
     Image normals;
     Image mask;
     if (truth) {
       if (truth->diffuse) {
         truth->diffuse->move_to(y0, y0 + core);
-        diffuse = truth->diffuse->images();
+        diffuse_rows = &truth->diffuse->images();
       }
       truth->normals->move_to(y0, y0 + core);
       normals = truth->normals->images().front();
@@ -339,8 +343,8 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
         append_normal_angles(out.normals, normals, mask.empty() ? nullptr : &mask,
                              &normal_angles[k]);
         if (report.has_truth) {
-          truth_psnr[k].add(psnr_against_truth(tmap, cap.dirs, diffuse, normals));
-          outliers[k].add(outlier_scores(out.labels, band, diffuse, cap.dirs, normals, true));
+          truth_psnr[k].add(psnr_against_truth(tmap, cap.dirs, *diffuse_rows, normals));
+          outliers[k].add(outlier_scores(out.labels, band, *diffuse_rows, cap.dirs, normals, true));
         }
       }
     }

@@ -112,7 +112,8 @@ class SphereSearchError : public Error {
 };
 
 // Streams the photographs (all of one size). Throws ptmkit::Error naming a bad file or
-// option, SphereSearchError when the spheres cannot be told.
+// option (a file named as a mask whose pixels have two levels is refused as a photograph,
+// pointing to the mask hint), SphereSearchError when the spheres cannot be told.
 [[nodiscard]] StackCalibration calibrate_sphere_stack(
     const std::vector<std::filesystem::path>& files, const StackCalibrationOptions& options);
 

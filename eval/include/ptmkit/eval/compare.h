@@ -47,7 +47,7 @@ struct CompareOptions {
   bool ssim = true;
   fit::RobustOptions robust;
   fit::DesignOptions design;
-  // Rows of the capture read and fitted at a time; 0: as many as fit in about 256 MiB of
+  // Rows of the capture read and fitted at a time; 0: as many as fit in about 64 MiB of
   // samples over every stack read together (capture, test set, diffuse truth), at least 16.
   // The scores do not depend on it beyond rounding (SSIM windows reach across bands).
   int band_rows = 0;
