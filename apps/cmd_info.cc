@@ -107,7 +107,7 @@ void run_info(const InfoArgs& args) {
     nlohmann::json j;
     j["file"] = args.input;
     j["version"] = std::string(texture::to_string(info.version));
-    j["format"] = std::string(texture::format_name(info.format, info.compression));
+    j["format"] = std::string(info.format_line());
     if (info.compression == texture::PtmCompression::kJpeg) {
       j["jpeg_quality"] = info.compression_parameter;
     }
@@ -130,8 +130,11 @@ void run_info(const InfoArgs& args) {
   }
   std::printf("%s: %s %s, %d x %d texels\n", args.input.c_str(),
               std::string(texture::to_string(info.version)).c_str(),
-              std::string(texture::format_name(info.format, info.compression)).c_str(), info.width,
-              info.height);
+              std::string(info.format_line()).c_str(), info.width, info.height);
+  if (info.luminance_only) {
+    std::printf(
+        "  one luminance polynomial a texel, no colour: relit as grey (read as LRGB, white)\n");
+  }
   if (info.compression == texture::PtmCompression::kJpeg) {
     std::printf("  JPEG planes, quality %d (read into the uncompressed layout)\n",
                 info.compression_parameter);

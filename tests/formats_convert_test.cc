@@ -79,6 +79,11 @@ TEST(Convert, CommandLine) {
                              (dir / "out.ptm").string(), "--format", "jpeg-lrgb"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("PTM_FORMAT_JPEG_LRGB"), std::string::npos) << r.out;
+  // The size printed is the file's: the command commits its output only at the end, so the
+  // size cannot be read back from the path before then.
+  EXPECT_NE(r.out.find(", " + std::to_string(fs::file_size(dir / "out.ptm")) + " bytes"),
+            std::string::npos)
+      << r.out;
   r = test::run_ptmkit(
       {"export", "rti", (dir / "in.ptm").string(), "-o", (dir / "out.rti").string()});
   EXPECT_EQ(r.exit_code, 1);

@@ -30,8 +30,8 @@ TEST(Refusals, EveryUnsupportedVariantSaysWhatIsSupported) {
     std::string variant;
   };
   std::vector<Case> cases;
-  for (const char* f : {"PTM_FORMAT_LUM", "PTM_FORMAT_PTM_LUT", "PTM_FORMAT_PTM_C_LUT",
-                        "PTM_FORMAT_JPEGLS_RGB", "PTM_FORMAT_JPEGLS_LRGB", "PTM_FORMAT_PAL_RGB"}) {
+  for (const char* f : {"PTM_FORMAT_PTM_LUT", "PTM_FORMAT_PTM_C_LUT", "PTM_FORMAT_JPEGLS_RGB",
+                        "PTM_FORMAT_JPEGLS_LRGB", "PTM_FORMAT_PAL_RGB"}) {
     cases.push_back({std::string(f) + ".ptm", "PTM_1.2\n" + std::string(f) + tail,
                      "format " + std::string(f) + " is not supported"});
   }

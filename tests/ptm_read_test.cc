@@ -2,6 +2,7 @@
 // rewriting, and the error of every malformed file.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -102,6 +103,79 @@ TEST(PtmRead, HandWrittenLrgbFileDecodes) {
   }
   write_ptm_file(dir / "copy.ptm", f);
   EXPECT_EQ(read_bytes(dir / "copy.ptm"), read_bytes(path));
+}
+
+// PTM_FORMAT_LUM: one luminance polynomial a texel, no colour. It reads as an LRGB file whose
+// colour is white, so every LRGB path relights it as grey = the polynomial; written back, it
+// is a PTM_FORMAT_LRGB file with the same coefficient bytes. A LUM file with a colour block
+// after the luminance block (a layout no reader agrees on) is refused, not guessed.
+TEST(PtmRead, LuminanceOnlyFileReadsAsGrey) {
+  test::ScratchDir dir;
+  const int w = 3, h = 2;  // non-square, distinct rows: a flipped row order shows
+  const std::string header = "PTM_1.2\nPTM_FORMAT_LUM\n3\n2\n1 1 1 1 1 1\n0 0 0 0 0 0\n";
+  Bytes lum;
+  for (int sr = 0; sr < h; ++sr)
+    for (int x = 0; x < w; ++x)
+      for (int i = 0; i < kPtmTerms; ++i)
+        lum.push_back(static_cast<std::uint8_t>(i == 5 ? 60 + 90 * sr + 20 * x : 2 * i + x));
+  const fs::path path = dir / "lum.ptm";
+  write_bytes(path, header, lum);
+
+  const PtmInfo info = read_ptm_info(path);
+  EXPECT_TRUE(info.luminance_only);
+  EXPECT_EQ(info.format_line(), "PTM_FORMAT_LUM");
+  EXPECT_EQ(info.bytes_per_texel(), kPtmTerms);
+  EXPECT_EQ(info.data_bytes, lum.size());
+  const PtmFile f = read_ptm_file(path);
+  EXPECT_TRUE(f.luminance_only);
+  ASSERT_EQ(f.format, PtmFormat::kLRGB);
+  const Image img = relight(decode_ptm(f), {0, 0, 1});
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const double l = 60 + 90 * (h - 1 - y) + 20 * x;  // a5, file units; top row stored last
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_EQ(f.rgb_byte(x, y, c), 255);
+        EXPECT_NEAR(img.at(x, y, c), l / 255.0, kFloatRoundoff);
+      }
+    }
+  }
+  // The same bytes as an LRGB file with a white colour block relight identically.
+  Bytes lrgb = lum;
+  lrgb.resize(lum.size() + static_cast<std::size_t>(w) * h * 3, 255);
+  write_bytes(dir / "white.ptm", "PTM_1.2\nPTM_FORMAT_LRGB\n3\n2\n1 1 1 1 1 1\n0 0 0 0 0 0\n",
+              lrgb);
+  const Image white = relight(decode_ptm(read_ptm_file(dir / "white.ptm")), {0.3, -0.2, 0.93});
+  const Image grey = relight(decode_ptm(f), {0.3, -0.2, 0.93});
+  ASSERT_EQ(grey.width() * grey.height() * grey.channels(),
+            white.width() * white.height() * white.channels());
+  EXPECT_TRUE(std::equal(grey.data(), grey.data() + grey.width() * grey.height() * grey.channels(),
+                         white.data()));
+  // Written back: PTM_FORMAT_LRGB, the same bytes as that file.
+  write_ptm_file(dir / "copy.ptm", f);
+  EXPECT_EQ(read_ptm_info(dir / "copy.ptm").format_line(), "PTM_FORMAT_LRGB");
+  EXPECT_EQ(read_ptm_file(dir / "copy.ptm").data, lrgb);
+
+  // Two or three colour bytes a texel after the luminance block: refused by name.
+  for (const int extra : {2, 3}) {
+    Bytes more = lum;
+    more.resize(lum.size() + static_cast<std::size_t>(w) * h * extra, 128);
+    const fs::path p = dir / ("lum" + std::to_string(extra) + ".ptm");
+    write_bytes(p, header, more);
+    try {
+      (void)read_ptm_file(p);
+      ADD_FAILURE() << p << " was accepted";
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(p.filename().string()), std::string::npos) << msg;
+      EXPECT_NE(msg.find("PTM_FORMAT_LUM with " + std::to_string(extra) +
+                         " colour bytes a texel after the luminance block is not supported"),
+                std::string::npos)
+          << msg;
+    }
+  }
+  // PTM 1.1 has no LUM variant.
+  write_bytes(dir / "old.ptm", "PTM_1.1\nPTM_FORMAT_LUM\n3\n2\n1 1 1 1 1 1\n0 0 0 0 0 0\n", lum);
+  EXPECT_THROW((void)read_ptm_file(dir / "old.ptm"), Error);
 }
 
 TEST(PtmRead, Ptm11LrgbInterleaved) {

@@ -96,7 +96,8 @@ ConvertReport convert_to_ptm(const fs::path& input, const fs::path& output,
   PtmFile out;
   if (source == TextureSource::kPtm) {
     const PtmFile in = read_ptm_file(input);
-    report.from = std::string(format_name(in.format, in.compression));
+    report.from =
+        in.luminance_only ? "PTM_FORMAT_LUM" : std::string(format_name(in.format, in.compression));
     const PtmFormat format = target.same ? in.format : target.format;
     const PtmCompression compression = target.same ? in.compression : target.compression;
     const std::string to(format_name(format, compression));
@@ -151,9 +152,7 @@ ConvertReport convert_to_ptm(const fs::path& input, const fs::path& output,
     out.compression_parameter = options.jpeg_quality > 0 ? options.jpeg_quality : 90;
   }
   report.to = std::string(format_name(out.format, out.compression));
-  write_ptm_file(output, out);
-  std::error_code ec;
-  report.file_bytes = static_cast<std::size_t>(fs::file_size(output, ec));
+  report.file_bytes = write_ptm_file(output, out);
   return report;
 }
 

@@ -25,7 +25,13 @@ std::string_view format_name(PtmFormat format, PtmCompression compression) {
   return to_string(format);
 }
 
-int PtmInfo::bytes_per_texel() const { return internal::bytes_per_texel(format); }
+int PtmInfo::bytes_per_texel() const {
+  return luminance_only ? kPtmTerms : internal::bytes_per_texel(format);
+}
+
+std::string_view PtmInfo::format_line() const {
+  return luminance_only ? "PTM_FORMAT_LUM" : format_name(format, compression);
+}
 
 // ---------------------------------------------------------------------------------------------
 // PtmFile

@@ -140,6 +140,10 @@ Header parse_header(const std::uint8_t* data, std::size_t size, const fs::path& 
     h.format = PtmFormat::kRGB;
   } else if (format == "PTM_FORMAT_LRGB") {
     h.format = PtmFormat::kLRGB;
+  } else if (format == "PTM_FORMAT_LUM") {
+    // One luminance polynomial per texel and no colour: an LRGB file whose colour is white.
+    h.format = PtmFormat::kLRGB;
+    h.luminance_only = true;
   } else if (format == "PTM_FORMAT_JPEG_RGB") {
     h.format = PtmFormat::kRGB;
     h.compression = PtmCompression::kJpeg;
@@ -147,19 +151,17 @@ Header parse_header(const std::uint8_t* data, std::size_t size, const fs::path& 
     h.format = PtmFormat::kLRGB;
     h.compression = PtmCompression::kJpeg;
   } else {
-    // PTM 1.2 names PTM_FORMAT_LUM, PTM_FORMAT_PTM_LUT, PTM_FORMAT_PTM_C_LUT and
+    // PTM 1.2 also names PTM_FORMAT_PTM_LUT, PTM_FORMAT_PTM_C_LUT and
     // PTM_FORMAT_JPEGLS_RGB/LRGB; anything else is not a format at all.
     const bool named = format.substr(0, 11) == "PTM_FORMAT_";
     throw Error(tokens.at() + ": " +
                 unsupported_variant((named ? "format " : "unknown format '") + printable(format) +
                                     (named ? "" : "'")));
   }
-  if (h.version == PtmVersion::k1_1 && h.compression != PtmCompression::kNone) {
+  // PTM 1.1 has one layout: LRGB, interleaved.
+  if (h.version == PtmVersion::k1_1 && (h.compression != PtmCompression::kNone ||
+                                        h.format != PtmFormat::kLRGB || h.luminance_only)) {
     throw Error(tokens.at() + ": " + unsupported_variant("PTM_1.1 " + printable(format)));
-  }
-  if (h.version == PtmVersion::k1_1 && h.format != PtmFormat::kLRGB) {
-    throw Error(tokens.at() + ": " +
-                unsupported_variant("PTM_1.1 " + std::string(to_string(h.format))));
   }
 
   auto dimension = [&](const char* what) {

@@ -29,8 +29,9 @@ namespace {
 
 std::size_t data_bytes(const Header& h) {
   if (h.compression == PtmCompression::kJpeg) return h.jpeg.data_bytes();
-  return static_cast<std::size_t>(h.width) * static_cast<std::size_t>(h.height) *
-         static_cast<std::size_t>(internal::bytes_per_texel(h.format));
+  const std::size_t texels = static_cast<std::size_t>(h.width) * static_cast<std::size_t>(h.height);
+  if (h.luminance_only) return texels * kPtmTerms;
+  return texels * static_cast<std::size_t>(internal::bytes_per_texel(h.format));
 }
 
 std::vector<std::uint8_t> read_bytes(const fs::path& path, std::size_t limit) {
@@ -58,6 +59,7 @@ PtmInfo info_from(const Header& h, const fs::path& path, std::size_t file_bytes)
   info.path = path;
   info.version = h.version;
   info.format = h.format;
+  info.luminance_only = h.luminance_only;
   info.width = h.width;
   info.height = h.height;
   info.quantisation = h.quantisation;
@@ -88,23 +90,34 @@ PtmFile read_ptm_file(const fs::path& path) {
   // Declared sizes are checked against the file before anything of that size is allocated.
   const std::size_t expected = data_bytes(h);
   const std::size_t present = bytes.size() - h.header_bytes;
+  const std::string name(info_from(h, path, bytes.size()).format_line());
+  if (h.luminance_only && present > expected && present % h.texels() == 0 &&
+      present / h.texels() > kPtmTerms && present / h.texels() <= kPtmTerms + 3) {
+    // One description of the format puts 2 or 3 colour bytes a texel after the luminance
+    // block, in an order no reader agrees on and no sample file settles: refused, not guessed.
+    throw Error(where(path) + ": PTM_FORMAT_LUM with " +
+                std::to_string(present / h.texels() - kPtmTerms) +
+                " colour bytes a texel after the luminance block is not supported (the order of "
+                "that block is not defined; supported: PTM_FORMAT_LUM with the luminance block "
+                "alone, " +
+                std::to_string(kPtmTerms) + " bytes a texel)");
+  }
   if (present < expected) {
     throw Error(where(path) + ": binary data truncated: " + std::to_string(h.width) + " x " +
-                std::to_string(h.height) + " " + std::string(format_name(h.format, h.compression)) +
-                " needs " + std::to_string(expected) + " bytes after the header, found " +
-                std::to_string(present));
+                std::to_string(h.height) + " " + name + " needs " + std::to_string(expected) +
+                " bytes after the header, found " + std::to_string(present));
   }
   if (present > expected) {
     // Not tolerated: a header line too many or a wrong declared size shifts every texel.
     throw Error(where(path) + ": " + std::to_string(present - expected) +
                 " bytes after the binary block: " + std::to_string(h.width) + " x " +
-                std::to_string(h.height) + " " + std::string(to_string(h.format)) + " needs " +
-                std::to_string(expected) +
+                std::to_string(h.height) + " " + name + " needs " + std::to_string(expected) +
                 " (a damaged file, or a header that does not describe the data)");
   }
   PtmFile f;
   f.version = h.version;
   f.format = h.format;
+  f.luminance_only = h.luminance_only;
   f.compression = h.compression;
   f.compression_parameter = h.jpeg.quality;
   f.width = h.width;
@@ -117,6 +130,14 @@ PtmFile read_ptm_file(const fs::path& path) {
     // The header describes streams that are not kept: a rewrite writes its own.
     f.data = internal::decode_jpeg_planes(bytes.data() + h.header_bytes, expected, h.jpeg, h.format,
                                           h.width, h.height, path);
+    return f;
+  }
+  if (h.luminance_only) {
+    // The LRGB layout: the luminance block as stored, then a white colour block. The header
+    // is not kept (it says PTM_FORMAT_LUM): a rewrite is a PTM_FORMAT_LRGB file.
+    f.data.reserve(h.texels() * internal::bytes_per_texel(PtmFormat::kLRGB));
+    f.data.assign(data_begin, data_end);
+    f.data.resize(h.texels() * internal::bytes_per_texel(PtmFormat::kLRGB), 255);
     return f;
   }
   f.header.assign(bytes.begin(), data_begin);
@@ -193,7 +214,7 @@ PtmSummary summarise_ptm(const fs::path& path) {
     s.representable_min[i] = std::min(ra, rb);
     s.representable_max[i] = std::max(ra, rb);
   }
-  s.file_bytes_per_texel = internal::bytes_per_texel(file.format);
+  s.file_bytes_per_texel = s.info.bytes_per_texel();
   const int floats = file.format == PtmFormat::kRGB ? 3 * kPtmTerms : kPtmTerms + 3;
   s.map_bytes_per_texel = floats * static_cast<int>(sizeof(float));
   return s;

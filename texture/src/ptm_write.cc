@@ -82,7 +82,7 @@ std::size_t data_bytes(PtmFormat format, int width, int height) {
 
 }  // namespace
 
-void write_ptm_file(const fs::path& path, const PtmFile& file) {
+std::size_t write_ptm_file(const fs::path& path, const PtmFile& file) {
   if (file.width <= 0 || file.height <= 0 || file.width > kMaxPtmSide ||
       file.height > kMaxPtmSide) {
     throw Error(where(path) + ": cannot write a " + std::to_string(file.width) + " x " +
@@ -123,7 +123,7 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
       const auto* raw = reinterpret_cast<const std::uint8_t*>(file.header.data());
       const Header h = parse_header(raw, file.header.size(), path);
       if (h.header_bytes == file.header.size() && h.version == file.version &&
-          h.format == file.format && h.compression == PtmCompression::kNone &&
+          h.format == file.format && !h.luminance_only && h.compression == PtmCompression::kNone &&
           h.width == file.width && h.height == file.height && h.quantisation == file.quantisation) {
         header = file.header;
       }
@@ -131,13 +131,14 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
       // Stale or foreign text: the canonical header is written instead.
     }
   }
+  const std::vector<std::uint8_t>& block =
+      file.compression == PtmCompression::kJpeg ? jpeg_block : file.data;
+  const std::size_t block_bytes = block.size();
   AtomicOutput out(path);
   {
     std::ofstream f(out.temp_path(), std::ios::binary | std::ios::trunc);
     if (!f) throw Error(where(path) + ": cannot open for writing");
     f.write(header.data(), static_cast<std::streamsize>(header.size()));
-    const std::vector<std::uint8_t>& block =
-        file.compression == PtmCompression::kJpeg ? jpeg_block : file.data;
     f.write(reinterpret_cast<const char*>(block.data()),
             static_cast<std::streamsize>(block.size()));
     f.write(reinterpret_cast<const char*>(file.trailing.data()),
@@ -146,6 +147,7 @@ void write_ptm_file(const fs::path& path, const PtmFile& file) {
     if (!f) throw Error(where(path) + ": write failed (disk full?)");
   }
   out.commit();
+  return header.size() + block_bytes + file.trailing.size();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -218,9 +220,8 @@ PtmWriteReport write_ptm(const fs::path& path, const CoefficientMap& map,
   } catch (const Error& e) {
     throw Error(where(path) + ": " + e.what());
   }
-  write_ptm_file(path, file);
   report.path = path;
-  report.file_bytes = file.canonical_header().size() + file.data.size();
+  report.file_bytes = write_ptm_file(path, file);
   return report;
 }
 

@@ -33,7 +33,8 @@ LoadedTexture read_texture(const fs::path& path, ColourSpace colour_space) {
       break;
     case TextureSource::kPtm: {
       const PtmFile file = read_ptm_file(path);
-      t.format = std::string(format_name(file.format, file.compression));
+      t.format = file.luminance_only ? "PTM_FORMAT_LUM"
+                                     : std::string(format_name(file.format, file.compression));
       t.ptm = decode_ptm(file, colour_space);
       break;
     }

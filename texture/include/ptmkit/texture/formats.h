@@ -12,7 +12,8 @@ namespace ptmkit::texture {
 // The readable variants, as a sentence fragment.
 inline constexpr std::string_view kSupportedFormats =
     "supported: .ptm PTM_1.2 PTM_FORMAT_RGB, PTM_FORMAT_LRGB, PTM_FORMAT_JPEG_RGB, "
-    "PTM_FORMAT_JPEG_LRGB (and PTM_1.1 PTM_FORMAT_LRGB); .rti RTI type 3 (HSH, 4, 9 or 16 "
+    "PTM_FORMAT_JPEG_LRGB, PTM_FORMAT_LUM (and PTM_1.1 PTM_FORMAT_LRGB); .rti RTI type 3 (HSH, 4, "
+    "9 or 16 "
     "terms); relight/OpenLIME web folders (info.json) of type ptm or hsh, colour space rgb or "
     "lrgb, layout image or deepzoom";
 

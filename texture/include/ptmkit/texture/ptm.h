@@ -100,6 +100,8 @@ struct PtmInfo {
   std::filesystem::path path;
   PtmVersion version = PtmVersion::k1_2;
   PtmFormat format = PtmFormat::kRGB;
+  // PTM_FORMAT_LUM (format is then kLRGB): one luminance polynomial a texel, no colour.
+  bool luminance_only = false;
   int width = 0;
   int height = 0;
   PtmQuantisation quantisation;
@@ -110,14 +112,20 @@ struct PtmInfo {
   std::size_t file_bytes = 0;      // size on disk
   std::size_t trailing_bytes = 0;  // bytes after the binary block (read_ptm_file refuses them)
 
-  // Bytes per texel in the file: 18 for RGB, 9 for LRGB.
+  // Bytes per texel in the file: 18 for RGB, 9 for LRGB, 6 for LUM.
   [[nodiscard]] int bytes_per_texel() const;
+  // The format line as the file spells it (PTM_FORMAT_LUM included).
+  [[nodiscard]] std::string_view format_line() const;
 };
 
 // A .ptm file in memory, as stored: enough to write it back bit-exactly.
 struct PtmFile {
   PtmVersion version = PtmVersion::k1_2;
   PtmFormat format = PtmFormat::kRGB;
+  // Read from a PTM_FORMAT_LUM file: format is kLRGB and data holds a white colour block
+  // after the luminance block, so every LRGB path evaluates it (grey = the polynomial).
+  // Written back as PTM_FORMAT_LRGB.
+  bool luminance_only = false;
   int width = 0;
   int height = 0;
   PtmQuantisation quantisation;
@@ -169,8 +177,9 @@ struct PtmFile {
 // The header only (the binary block's presence is not checked; file_bytes says how much is
 // there).
 [[nodiscard]] PtmInfo read_ptm_info(const std::filesystem::path& path);
-// Writes a file atomically, exactly as held (see PtmFile::header).
-void write_ptm_file(const std::filesystem::path& path, const PtmFile& file);
+// Writes a file atomically, exactly as held (see PtmFile::header). Returns the bytes written
+// (a JPEG variant's compressed size, which PtmFile::data does not tell).
+std::size_t write_ptm_file(const std::filesystem::path& path, const PtmFile& file);
 
 inline constexpr int kMaxPtmSide = 1 << 20;
 // Biases read and written: any integer of at most this magnitude.
