@@ -28,11 +28,13 @@ namespace {
 // The targets of docs/CALIBRATION.md's sphere-stack table: the circle's centre within 0.5 px
 // and radius within 0.5%, the lights' mean error within 0.2 and the worst within 1 degree.
 // Measured on these renders at most 0.006 px, 0.023%, 0.147 and 0.365 degrees; on the photo
-// renders 0.31 px, 0.32% and a worst light of 0.85 degrees.
+// renders (8 lights, in memory) 0.31 px, 0.32% and a worst light of 0.51 degrees.
 constexpr double kCentreTargetPx = 0.5;
 constexpr double kRadiusTargetRel = 0.005;
 constexpr double kLightMeanTargetDeg = 0.2;
 constexpr double kLightMaxTargetDeg = 1.0;
+// The photo-dome test's 8 lights: measured 0.244 deg; 0.44 without the halo's symmetry.
+constexpr double kPhotoDomeEightLightsMeanDeg = 0.3;
 // A candidate scoring below the default --min-score (0.5) is never taken (docs/CALIBRATION.md).
 constexpr double kMinScore = 0.5;
 // uw-psm's circle found without a hint against the mask's: measured 0.97 px apart (its lower
@@ -431,10 +433,61 @@ TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
     mean += a / static_cast<double>(truth.light_dirs.size());
     max = std::max(max, a);
   }
-  // Measured, not yet at the 0.2 / 1 degree target on these renders (docs/CALIBRATION.md);
-  // bounded here at what a wrong highlight or circle would exceed many times over.
+  // These 8 lights, rendered in memory: measured mean 0.244 deg (0.44 when small highlight
+  // cores are located by their edge alone, without their halo's symmetry); the 22-light
+  // JPEG preset meets the 0.2 degree mean (docs/CALIBRATION.md).
   std::printf("photo-dome lights: mean %.3f max %.3f deg\n", mean, max);
+  EXPECT_LE(mean, kPhotoDomeEightLightsMeanDeg);
   EXPECT_LE(max, kLightMaxTargetDeg);
+}
+
+// A glass ball's refracted hot spot can be larger than its surface reflection, so the
+// brightest-then-largest rule takes it. With two spheres the reflections agree on one
+// distant light and the hot spot does not: here a saturated spot larger than the reflection
+// is painted on the first sphere, away from its reflection, in one image; the reflection is
+// still taken, and the report says that the second spot was.
+TEST(CalibSphereStack, ASecondSpotThatAgreesWithTheOtherSphereIsTaken) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-dome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("glass" + std::to_string(i) + ".jpg");
+  }
+  const int target = 4;
+  const synth::PhotoSphereTruth& s0 = truth.spheres[0];
+  ASSERT_TRUE(s0.highlight_px[target].has_value());
+  // The spot: on the far side of the centre from the reflection, radius 5 px (the
+  // reflection's clipped core is 4-6 pixels in all).
+  const Eigen::Vector2d away = (s0.outline.centre_px - *s0.highlight_px[target]).normalized();
+  const Eigen::Vector2d spot = s0.outline.centre_px + 0.5 * s0.outline.radius_px * away;
+  Image& img = images[target];
+  for (int y = 0; y < img.height(); ++y) {
+    for (int x = 0; x < img.width(); ++x) {
+      if ((Eigen::Vector2d(x, y) - spot).norm() > 5.0) continue;
+      for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = 1.0f;
+    }
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  const SphereLight& l = r.rig.spheres[0].lights[target];
+  EXPECT_EQ(l.spot_rank, 1);
+  EXPECT_GT(l.second_peak, 0.0);
+  ASSERT_TRUE(l.found) << l.flag;
+  EXPECT_LT((l.highlight_px - *s0.highlight_px[target]).norm(), 1.0);
+  EXPECT_LE(angle_deg(r.rig.lights[target].direction, truth.light_dirs[target]),
+            kLightMaxTargetDeg);
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    if (static_cast<int>(i) != target) {
+      EXPECT_EQ(r.rig.spheres[0].lights[i].spot_rank, 0) << i;
+    }
+  }
 }
 
 // Chrome spheres with a glazed dish beside them: the dish's glint moves with the light too,

@@ -296,6 +296,7 @@ std::string SphereReport::to_json() const {
                         {"blob_axes_px", {l.blob_major_px, l.blob_minor_px}},
                         {"blob_angle_deg", l.blob_angle_deg},
                         {"second_peak", l.second_peak},
+                        {"spot_rank", l.spot_rank},
                         {"residual_px", l.residual_px},
                         {"confidence", l.confidence},
                         {"outlier", l.outlier}};

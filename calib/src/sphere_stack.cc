@@ -64,6 +64,82 @@ void shape(const std::vector<Eigen::Vector3d>& samples, Located* out) {
   out->ok = true;
 }
 
+// Brightness above the median at a sub-pixel point (window pixels), bilinear; false outside.
+bool lift_at(const cv::Mat& lift, double x, double y, double* v) {
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= lift.cols || y0 + 1 >= lift.rows) return false;
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = lift.ptr<float>(y0);
+  const float* r1 = lift.ptr<float>(y0 + 1);
+  *v =
+      (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  return true;
+}
+
+// The centre about which the highlight's brightness (above the stack's median) is most nearly
+// point-symmetric: Gauss-Newton on sum_p (L(p) - L(2c - p))^2 over the pixels p within
+// `radius` of the start. A light's highlight on a sphere is symmetric about its centre to
+// first order, and so are its bloom and its flare (the spokes come in opposite pairs), so
+// every pixel of the halo takes part, not only the core's edge: the clipped core alone pins
+// the centre to about 0.15 px, the halo's slopes to a fraction of that. Pixels clipped on
+// both sides cancel. Returns the start when the fit does not settle within `max_shift`.
+Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& start_win,
+                                 double radius, double max_shift,
+                                 const std::function<bool(int, int)>& inside_win) {
+  std::vector<Eigen::Vector2d> pts;
+  const int r = static_cast<int>(std::ceil(radius));
+  const int cx = static_cast<int>(std::lround(start_win.x()));
+  const int cy = static_cast<int>(std::lround(start_win.y()));
+  for (int y = cy - r; y <= cy + r; ++y) {
+    for (int x = cx - r; x <= cx + r; ++x) {
+      if (x < 0 || y < 0 || x >= lift.cols || y >= lift.rows) continue;
+      if ((Eigen::Vector2d(x, y) - start_win).norm() > radius || !inside_win(x, y)) continue;
+      pts.emplace_back(x, y);
+    }
+  }
+  if (pts.size() < 12) return start_win;
+  Eigen::Vector2d c = start_win;
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
+    int used = 0;
+    for (const Eigen::Vector2d& p : pts) {
+      const Eigen::Vector2d q = 2.0 * c - p;
+      if (!inside_win(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())))) {
+        continue;
+      }
+      double vp = 0, vq = 0, xm = 0, xp = 0, ym = 0, yp = 0;
+      if (!lift_at(lift, p.x(), p.y(), &vp) || !lift_at(lift, q.x(), q.y(), &vq) ||
+          !lift_at(lift, q.x() - 0.5, q.y(), &xm) || !lift_at(lift, q.x() + 0.5, q.y(), &xp) ||
+          !lift_at(lift, q.x(), q.y() - 0.5, &ym) || !lift_at(lift, q.x(), q.y() + 0.5, &yp)) {
+        continue;
+      }
+      const Eigen::Vector2d j = -2.0 * Eigen::Vector2d(xp - xm, yp - ym);  // d r / d c
+      const double res = vp - vq;
+      jtj += j * j.transpose();
+      jtr += j * res;
+      ++used;
+    }
+    if (used < 12 || std::abs((jtj(0, 0) * jtj(1, 1) - jtj(0, 1) * jtj(1, 0))) < 1e-12)
+      return start_win;  // flat: no slope
+    const double det = (jtj(0, 0) * jtj(1, 1) - jtj(0, 1) * jtj(1, 0));
+    const Eigen::Vector2d step(-(jtj(1, 1) * jtr.x() - jtj(0, 1) * jtr.y()) / det,
+                               -(jtj(0, 0) * jtr.y() - jtj(1, 0) * jtr.x()) / det);
+    c += step.cwiseMax(-0.5).cwiseMin(0.5);  // the linearisation holds within half a pixel
+    if ((c - start_win).norm() > max_shift) return start_win;
+    if (step.norm() < 1e-4) break;
+  }
+  return c;
+}
+
+// Highlights whose core (saturated) or spot (above half the peak) has at most this many
+// pixels are refined by symmetric_centre.
+constexpr int kSmallCorePixels = 20;
+
+// A second spot replaces the brightest only when the spheres' directions then agree better by
+// this much (sum of pairwise angles, degrees).
+constexpr double kSpotAgreementMarginDeg = 3.0;
+
 // The highlight in a window (photo pixels), `base` the stack's median there (same size),
 // `inside` tells photo pixels on the sphere's searched disc.
 Located locate(const Window& win, const cv::Mat& base,
@@ -216,6 +292,22 @@ Located locate(const Window& win, const cv::Mat& base,
     }
   }
   shape(samples, &out);
+  if (out.ok && out.pixels <= kSmallCorePixels) {
+    // A core of a few pixels has too few edge pixels to pin its centre (about 0.15 px on the
+    // photographic renders); its halo's symmetry pins it to about 0.04 px. A larger core (a
+    // mirror sphere's image of the light, a flat disc with a sharp edge) is located well by
+    // its edge, and its surroundings (the lit scene mirrored around it) are not symmetric.
+    const cv::Mat lift = l - base;
+    const double core_r = std::sqrt(std::max(1, out.pixels) / std::numbers::pi);
+    const double radius = std::max(4.0, 2.0 * core_r + 2.0);
+    const Eigen::Vector2d start(out.px.x() - win.rect.x, out.px.y() - win.rect.y);
+    const Eigen::Vector2d c =
+        symmetric_centre(lift, start, radius, std::max(1.0, core_r), [&](int x, int y) {
+          return x >= 0 && y >= 0 && x < l.cols && y < l.rows &&
+                 inside(x + win.rect.x, y + win.rect.y);
+        });
+    out.px = {c.x() + win.rect.x, c.y() + win.rect.y};
+  }
   return out;
 }
 
@@ -307,8 +399,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   const std::size_t k_spheres = circles.size();
   std::vector<SphereReport> reports(k_spheres);
   std::vector<Want> wants;
-  std::vector<std::vector<Spot>> first(k_spheres,
-                                       std::vector<Spot>(static_cast<std::size_t>(ev.n)));
+  std::vector<std::vector<std::vector<Spot>>> spots_of(
+      k_spheres, std::vector<std::vector<Spot>>(static_cast<std::size_t>(ev.n)));
   for (std::size_t k = 0; k < k_spheres; ++k) {
     const Circle& c = circles[k];
     reports[k].sphere = c;
@@ -317,25 +409,93 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     const Eigen::Vector2d cs = (c.centre_px - Eigen::Vector2d::Constant(0.5 * (s - 1))) / s;
     const double rs = det.search_radius_fraction * c.radius_px / s;
     for (int i = 0; i < ev.n; ++i) {
-      SphereLight& light = reports[k].lights[static_cast<std::size_t>(i)];
-      light.image = names[static_cast<std::size_t>(i)];
-      const std::vector<Spot> spots = moving_spots(ev, i, cs, rs, det.min_peak);
+      reports[k].lights[static_cast<std::size_t>(i)].image = names[static_cast<std::size_t>(i)];
+      spots_of[k][static_cast<std::size_t>(i)] = moving_spots(ev, i, cs, rs, det.min_peak);
+    }
+  }
+  // Which spot is the light's reflection: the brightest (a saturated one: the larger), unless
+  // with two or more spheres a second spot of comparable lift gives a direction that agrees
+  // with the other spheres' far better. A glass ball's refracted hot spot (the light it
+  // focuses, seen through it) can be larger than its reflection and does not obey mirror
+  // geometry; the reflections on every sphere agree on one distant light.
+  std::vector<std::vector<int>> rank(k_spheres, std::vector<int>(static_cast<std::size_t>(ev.n)));
+  if (k_spheres >= 2 && k_spheres <= 4) {
+    for (int i = 0; i < ev.n; ++i) {
+      const auto ii = static_cast<std::size_t>(i);
+      std::vector<int> choices(k_spheres, 1);
+      bool ambiguous = false;
+      for (std::size_t k = 0; k < k_spheres; ++k) {
+        const std::vector<Spot>& sp = spots_of[k][ii];
+        if (sp.empty()) choices[k] = 0;
+        if (sp.size() >= 2 && sp[1].lift >= 0.5 * sp[0].lift) {
+          choices[k] = 2;
+          ambiguous = true;
+        }
+      }
+      if (!ambiguous) continue;
+      auto direction = [&](std::size_t k, int r) {
+        const Eigen::Vector2d px = spots_of[k][ii][static_cast<std::size_t>(r)].centre_small * s +
+                                   Eigen::Vector2d::Constant(0.5 * (s - 1));
+        return reflect_highlight(circles[k], det.camera, px, ev.w, ev.h);
+      };
+      // Every combination (at most 2^4), scored by the sum of pairwise angles (degrees).
+      auto cost = [&](const std::vector<int>& pick) {
+        double sum = 0.0;
+        for (std::size_t a = 0; a < k_spheres; ++a) {
+          for (std::size_t b = a + 1; b < k_spheres; ++b) {
+            if (choices[a] == 0 || choices[b] == 0) continue;
+            const double c = direction(a, pick[a]).dot(direction(b, pick[b]));
+            sum += std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+          }
+        }
+        return sum;
+      };
+      std::vector<int> pick(k_spheres, 0), best = pick;
+      const double brightest = cost(pick);
+      double best_cost = brightest;
+      const int combos = 1 << k_spheres;
+      for (int m = 1; m < combos; ++m) {
+        bool valid = true;
+        for (std::size_t k = 0; k < k_spheres; ++k) {
+          pick[k] = (m >> k) & 1;
+          if (pick[k] >= std::max(1, choices[k])) valid = false;
+        }
+        if (!valid) continue;
+        const double c = cost(pick);
+        if (c < best_cost) {
+          best_cost = c;
+          best = pick;
+        }
+      }
+      // The spots' coarse positions (analysis pixels) give directions to a degree or two; a
+      // refracted spot is tens of degrees off.
+      if (best_cost < brightest - kSpotAgreementMarginDeg) {
+        for (std::size_t k = 0; k < k_spheres; ++k) rank[k][ii] = best[k];
+      }
+    }
+  }
+  for (std::size_t k = 0; k < k_spheres; ++k) {
+    for (int i = 0; i < ev.n; ++i) {
+      const auto ii = static_cast<std::size_t>(i);
+      SphereLight& light = reports[k].lights[ii];
+      const std::vector<Spot>& spots = spots_of[k][ii];
       if (spots.empty()) {
         light.flag = "no highlight on the sphere: nothing brighter than in the other images";
         continue;
       }
-      const Spot& sp = spots.front();
-      first[k][static_cast<std::size_t>(i)] = sp;
-      if (spots.size() >= 2 && spots[1].lift >= 0.5 * sp.lift) {
-        light.second_peak = spots[1].peak;
+      const int r = rank[k][ii];
+      const Spot& sp = spots[static_cast<std::size_t>(r)];
+      light.spot_rank = r;
+      if (spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift) {
+        light.second_peak = spots[r == 0 ? 1 : 0].peak;
         ++out.two_spot_images;
       }
       const int margin = static_cast<int>(std::ceil(std::max(6.0, 2.0 * s)));
-      cv::Rect r(static_cast<int>(sp.box.x * s) - margin, static_cast<int>(sp.box.y * s) - margin,
-                 static_cast<int>(sp.box.width * s) + 2 * margin,
-                 static_cast<int>(sp.box.height * s) + 2 * margin);
-      r &= cv::Rect(0, 0, ev.w, ev.h);
-      wants.push_back({i, static_cast<int>(k), r});
+      cv::Rect box(static_cast<int>(sp.box.x * s) - margin, static_cast<int>(sp.box.y * s) - margin,
+                   static_cast<int>(sp.box.width * s) + 2 * margin,
+                   static_cast<int>(sp.box.height * s) + 2 * margin);
+      box &= cv::Rect(0, 0, ev.w, ev.h);
+      wants.push_back({i, static_cast<int>(k), box});
     }
   }
   // Windows: straight from the analysis copy at scale 1, else a second streamed pass.

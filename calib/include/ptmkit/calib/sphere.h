@@ -92,6 +92,11 @@ struct SphereLight {
   // 3 pixels and its own size), full scale 1: a second candidate of similar brightness
   // makes the highlight ambiguous (a reflection of the scene, a second light).
   double second_peak = 0.0;
+  // Which moving spot was taken (calibrate_sphere_stack): 0, the brightest (a saturated one:
+  // the larger); 1, the second, because its direction agrees with the other spheres' and the
+  // brightest's does not (a glass ball's refracted hot spot). second_peak is then the
+  // brightest's peak.
+  int spot_rank = 0;
   // Filled by the rig refinement (sphere_refine.h); 0 / false before it.
   double residual_px = 0.0;  // predicted minus measured highlight, pixels
   double confidence = 0.0;   // 0..1, see sphere_refine.h

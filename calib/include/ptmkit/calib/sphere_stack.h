@@ -36,9 +36,12 @@
 //   saturated    the clipped core without its flare streaks and bloom: the pixels at least
 //                half the core's inscribed radius from the clipped region's edge, grown back
 //                by that radius inside it (a morphological opening), their centroid
-// Two moving spots in the circle in most images (a glass ball's surface reflection and its
-// refracted hot spot) are reported (StackCalibration::two_spot_images): the brightest spot
-// is still the one taken.
+// A small core (at most 20 pixels) is then moved to the centre about which its halo is most
+// nearly point-symmetric. Two moving spots in the circle (a glass ball's surface reflection
+// and its refracted hot spot) are reported (StackCalibration::two_spot_images); with two or
+// more spheres the spot whose direction agrees with the other spheres' is taken (a refracted
+// spot does not obey mirror geometry; SphereLight::spot_rank says which), with one sphere the
+// brightest.
 #pragma once
 
 #include <filesystem>

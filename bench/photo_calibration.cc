@@ -1,0 +1,129 @@
+// Sphere calibration on the photographic renders (synth/photo.h), as a user runs it: each
+// preset rendered to JPEG files exactly as `ptmkit synth --preset P --seed S` writes them,
+// calibrated from the files without hints (the preset's sphere count and focal length given,
+// as `ptmkit calibrate sphere ... --spheres N --focal-px F` does), then compared with the
+// render's truth: each circle's centre and radius, each highlight against the mirror
+// highlight of its light, and each combined light direction.
+//
+//   photo_calibration WORK_DIR [PRESET[:SEED,SEED...] ...]
+//       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1 photo-large-sphere:1
+//
+// Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "ptmkit/calib/sphere_stack.h"
+#include "ptmkit/core/error.h"
+#include "ptmkit/synth/photo.h"
+
+namespace fs = std::filesystem;
+using namespace ptmkit;
+
+namespace {
+
+double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 /
+         std::numbers::pi;
+}
+
+void run(const fs::path& work, const std::string& preset, unsigned seed) {
+  synth::PhotoOptions po = synth::photo_preset_options(preset);
+  po.seed = seed;
+  const fs::path dir = work / (preset + "-" + std::to_string(seed));
+  fs::remove_all(dir);
+  const synth::PhotoReport rendered = synth::render_photo_capture(po, dir);
+  const synth::PhotoTruth truth = synth::PhotoRenderer(po).truth();
+
+  calib::StackCalibrationOptions o;
+  o.rig.sphere_count = static_cast<int>(po.spheres.size());
+  o.rig.detection.camera.focal_px = po.focal_px;
+  std::vector<fs::path> photos;  // the report lists the truth masks too
+  for (const fs::path& f : rendered.files) {
+    if (f.parent_path() == dir && f.filename().string().rfind("image_", 0) == 0) {
+      photos.push_back(f);
+    }
+  }
+  const calib::StackCalibration r = calib::calibrate_sphere_stack(photos, o);
+
+  std::printf("%s seed %u:", preset.c_str(), seed);
+  for (std::size_t k = 0; k < r.rig.spheres.size() && k < truth.spheres.size(); ++k) {
+    const calib::Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = truth.spheres[k].outline;
+    // Highlights against the mirror highlight of each light (where the truth has one).
+    double sum = 0.0, worst = 0.0;
+    int n = 0;
+    const auto& lights = r.rig.spheres[k].lights;
+    for (std::size_t i = 0; i < lights.size() && i < truth.spheres[k].highlight_px.size(); ++i) {
+      if (!lights[i].found || !truth.spheres[k].highlight_px[i]) continue;
+      const double d = (lights[i].highlight_px - *truth.spheres[k].highlight_px[i]).norm();
+      sum += d;
+      worst = std::max(worst, d);
+      ++n;
+    }
+    std::printf(" sphere %zu centre %.3f px radius %.3f%% highlights mean %.3f max %.3f px;", k,
+                (c.centre_px - t.centre_px).norm(),
+                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px, n ? sum / n : 0.0,
+                worst);
+  }
+  double mean = 0.0, max = 0.0;
+  int used = 0;
+  for (std::size_t i = 0; i < r.rig.lights.size() && i < truth.light_dirs.size(); ++i) {
+    if (!r.rig.lights[i].found) continue;
+    const double a = angle_deg(r.rig.lights[i].direction, truth.light_dirs[i]);
+    mean += a;
+    max = std::max(max, a);
+    ++used;
+  }
+  std::printf(" lights %d of %zu, mean %.3f max %.3f deg\n", used, truth.light_dirs.size(),
+              used ? mean / used : 0.0, max);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    if (argc < 2) {
+      std::fprintf(stderr, "usage: photo_calibration WORK_DIR [PRESET[:SEED,...] ...]\n");
+      return 2;
+    }
+    const fs::path work = argv[1];
+    std::vector<std::string> specs(argv + 2, argv + argc);
+    if (specs.empty()) {
+      specs = {"photo-dome:1,2,3", "photo-glass:1,2,3", "photo-chrome:1", "photo-large-sphere:1"};
+    }
+    for (const std::string& spec : specs) {
+      const auto colon = spec.find(':');
+      const std::string preset = spec.substr(0, colon);
+      std::vector<unsigned> seeds;
+      if (colon == std::string::npos) {
+        seeds = {1};
+      } else {
+        std::string rest = spec.substr(colon + 1);
+        std::size_t at = 0;
+        while (at <= rest.size()) {
+          const auto comma = rest.find(',', at);
+          seeds.push_back(static_cast<unsigned>(std::stoul(rest.substr(at, comma - at))));
+          if (comma == std::string::npos) break;
+          at = comma + 1;
+        }
+      }
+      for (const unsigned s : seeds) {
+        try {
+          run(work, preset, s);
+        } catch (const calib::SphereSearchError& e) {
+          std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
+        }
+      }
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "photo_calibration: %s\n", e.what());
+    return 1;
+  }
+}
