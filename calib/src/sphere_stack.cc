@@ -7,8 +7,10 @@
 #include <cstdio>
 #include <functional>
 #include <numbers>
+#include <optional>
 
 #include <tbb/parallel_for.h>
+#include <Eigen/LU>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -140,11 +142,99 @@ constexpr int kSmallCorePixels = 20;
 // this much (sum of pairwise angles, degrees).
 constexpr double kSpotAgreementMarginDeg = 3.0;
 
+// A sphere whose clipped cores have at least this many pixels (median over the images) shows
+// the light as a disc: a core kMergedCoreRatio times as large is cut back to it (cut_to_disc).
+constexpr int kMergedCoreMinPixels = 12;
+constexpr double kMergedCoreRatio = 1.25;
+
+// A clipped region much larger than the sphere's usual core: the light's image merged with
+// something else clipped beside it (on a mirror sphere, the lit scene mirrored next to the
+// light). The light's image is a disc of the usual radius `r`: the disc, lying inside the
+// region, on whose circle most of the region's boundary pixels lie; the region is cut to it
+// (plus a pixel and a half), so the core's centroid sees the disc alone, the cut side
+// weighted as a clipped edge (mirrored from the opposite side).
+std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r) {
+  const cv::Mat& m = *region;
+  std::vector<Eigen::Vector2d> boundary, inner;
+  for (int y = 0; y < m.rows; ++y) {
+    for (int x = 0; x < m.cols; ++x) {
+      if (!m.at<std::uint8_t>(y, x)) continue;
+      inner.emplace_back(x, y);
+      const bool edge = x == 0 || y == 0 || x + 1 == m.cols || y + 1 == m.rows ||
+                        !m.at<std::uint8_t>(y, x - 1) || !m.at<std::uint8_t>(y, x + 1) ||
+                        !m.at<std::uint8_t>(y - 1, x) || !m.at<std::uint8_t>(y + 1, x);
+      if (edge) boundary.emplace_back(x, y);
+    }
+  }
+  const double disc_area = std::numbers::pi * r * r;
+  if (static_cast<double>(inner.size()) < kMergedCoreRatio * disc_area) return {};  // not merged
+  double best_score = -1.0;
+  Eigen::Vector2d best_c(0.0, 0.0);
+  for (const Eigen::Vector2d& p : inner) {
+    for (const double dy : {0.0, 0.5}) {
+      for (const double dx : {0.0, 0.5}) {
+        const Eigen::Vector2d c = p + Eigen::Vector2d(dx, dy);
+        // Mostly inside the region.
+        int in = 0, all = 0;
+        const int rr = static_cast<int>(std::ceil(r));
+        for (int y = static_cast<int>(c.y()) - rr; y <= static_cast<int>(c.y()) + rr + 1; ++y) {
+          for (int x = static_cast<int>(c.x()) - rr; x <= static_cast<int>(c.x()) + rr + 1; ++x) {
+            if ((Eigen::Vector2d(x, y) - c).norm() > r - 0.5) continue;
+            ++all;
+            if (x >= 0 && y >= 0 && x < m.cols && y < m.rows && m.at<std::uint8_t>(y, x)) ++in;
+          }
+        }
+        if (all == 0 || in < 0.9 * all) continue;
+        int on = 0;
+        for (const Eigen::Vector2d& b : boundary) {
+          if (std::abs((b - c).norm() - r) < 0.75) ++on;
+        }
+        const double score = on + 0.01 * in;
+        if (score > best_score) {
+          best_score = score;
+          best_c = c;
+        }
+      }
+    }
+  }
+  if (best_score < 0.0) return {};
+  for (const Eigen::Vector2d& p : inner) {
+    if ((p - best_c).norm() > r + 1.5) {
+      region->at<std::uint8_t>(static_cast<int>(p.y()), static_cast<int>(p.x())) = 0;
+    }
+  }
+  // The centre to a fraction of a pixel: a circle (centre and radius) fitted by Gauss-Newton
+  // to the boundary pixels on the disc's circle; the merged side has none there.
+  std::vector<Eigen::Vector2d> arc;
+  for (const Eigen::Vector2d& b : boundary) {
+    if (std::abs((b - best_c).norm() - r) < 1.0) arc.push_back(b);
+  }
+  if (arc.size() < 8) return {};
+  Eigen::Vector3d p(best_c.x(), best_c.y(), r - 0.5);  // boundary pixel centres lie inside
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
+    for (const Eigen::Vector2d& b : arc) {
+      const Eigen::Vector2d d = b - p.head<2>();
+      const double n = std::max(1e-9, d.norm());
+      const Eigen::Vector3d j(-d.x() / n, -d.y() / n, -1.0);
+      jtj += j * j.transpose();
+      jtr += j * (n - p.z());
+    }
+    const Eigen::Vector3d step = -jtj.inverse() * jtr;
+    p += step;
+    if (step.norm() < 1e-5) break;
+  }
+  if (!p.allFinite() || (p.head<2>() - best_c).norm() > 1.5) return {};
+  return Eigen::Vector2d(p.x(), p.y());
+}
+
 // The highlight in a window (photo pixels), `base` the stack's median there (same size),
 // `inside` tells photo pixels on the sphere's searched disc.
-Located locate(const Window& win, const cv::Mat& base,
-               const std::function<bool(int, int)>& inside) {
+Located locate(const Window& win, const cv::Mat& base, const std::function<bool(int, int)>& inside,
+               double core_radius_hint = 0.0) {
   Located out;
+  std::optional<Eigen::Vector2d> disc_centre;  // window pixels, see cut_to_disc
   const cv::Mat& l = win.luma;
   double peak = 0.0;
   cv::Point at(-1, -1);
@@ -204,6 +294,7 @@ Located locate(const Window& win, const cv::Mat& base,
       }
     }
     cv::Mat region = labels == best;
+    if (core_radius_hint > 0.0) disc_centre = cut_to_disc(&region, core_radius_hint);
     cv::Mat padded;
     cv::copyMakeBorder(region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
     cv::Mat dist;
@@ -292,7 +383,9 @@ Located locate(const Window& win, const cv::Mat& base,
     }
   }
   shape(samples, &out);
-  if (out.ok && out.pixels <= kSmallCorePixels) {
+  if (out.ok && disc_centre) {
+    out.px = {disc_centre->x() + win.rect.x, disc_centre->y() + win.rect.y};
+  } else if (out.ok && out.pixels <= kSmallCorePixels) {
     // A core of a few pixels has too few edge pixels to pin its centre (about 0.15 px on the
     // photographic renders); its halo's symmetry pins it to about 0.04 px. A larger core (a
     // mirror sphere's image of the light, a flat disc with a sharp edge) is located well by
@@ -528,17 +621,20 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     });
   }
   const double sphere_area_factor = det.max_blob_area_fraction * std::numbers::pi;
-  for (std::size_t q = 0; q < wants.size(); ++q) {
-    const Want& wt = wants[q];
-    const Circle& c = circles[static_cast<std::size_t>(wt.sphere)];
-    SphereLight& light =
-        reports[static_cast<std::size_t>(wt.sphere)].lights[static_cast<std::size_t>(wt.image)];
+  auto inside_of = [&](std::size_t q) {
+    const Circle& c = circles[static_cast<std::size_t>(wants[q].sphere)];
     const double search_r = det.search_radius_fraction * c.radius_px;
-    auto inside = [&](int x, int y) {
+    return [c, search_r](int x, int y) {
       return (Eigen::Vector2d(x, y) - c.centre_px).squaredNorm() <= search_r * search_r;
     };
-    // The stack's median under the window (analysis resolution, nearest).
-    cv::Mat base(wt.rect.height, wt.rect.width, CV_32F);
+  };
+  // The stack's median under each window (analysis resolution, nearest).
+  std::vector<cv::Mat> bases(wants.size());
+  std::vector<Located> located(wants.size());
+  for (std::size_t q = 0; q < wants.size(); ++q) {
+    const Want& wt = wants[q];
+    cv::Mat& base = bases[q];
+    base.create(wt.rect.height, wt.rect.width, CV_32F);
     for (int y = 0; y < wt.rect.height; ++y) {
       for (int x = 0; x < wt.rect.width; ++x) {
         const int sx = std::min(ev.sw - 1, (x + wt.rect.x) / ev.scale);
@@ -546,7 +642,37 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         base.at<float>(y, x) = ev.small_median.at<float>(sy, sx);
       }
     }
-    const Located loc = locate(windows[q], base, inside);
+    located[q] = locate(windows[q], base, inside_of(q));
+  }
+  // A sphere's clipped cores are the light's image, of one size in every image (a mirror's
+  // disc): a core far larger than the sphere's median has merged with something clipped
+  // beside it and is cut back to a disc of the median's radius (cut_to_disc).
+  for (std::size_t k = 0; k < k_spheres; ++k) {
+    std::vector<int> sizes;
+    for (std::size_t q = 0; q < wants.size(); ++q) {
+      if (static_cast<std::size_t>(wants[q].sphere) == k && located[q].ok && located[q].saturated) {
+        sizes.push_back(located[q].pixels);
+      }
+    }
+    if (sizes.size() < 3) continue;
+    std::nth_element(sizes.begin(), sizes.begin() + static_cast<std::ptrdiff_t>(sizes.size() / 2),
+                     sizes.end());
+    const double median = sizes[sizes.size() / 2];
+    if (median < kMergedCoreMinPixels) continue;  // small cores: no disc to fit
+    for (std::size_t q = 0; q < wants.size(); ++q) {
+      if (static_cast<std::size_t>(wants[q].sphere) != k || !located[q].ok ||
+          !located[q].saturated || located[q].pixels < kMergedCoreRatio * median) {
+        continue;
+      }
+      located[q] = locate(windows[q], bases[q], inside_of(q), std::sqrt(median / std::numbers::pi));
+    }
+  }
+  for (std::size_t q = 0; q < wants.size(); ++q) {
+    const Want& wt = wants[q];
+    const Circle& c = circles[static_cast<std::size_t>(wt.sphere)];
+    SphereLight& light =
+        reports[static_cast<std::size_t>(wt.sphere)].lights[static_cast<std::size_t>(wt.image)];
+    const Located& loc = located[q];
     light.peak = loc.peak;
     light.saturated = loc.saturated;
     light.blob_pixels = loc.pixels;
