@@ -38,11 +38,11 @@
 //                by that radius inside it (a morphological opening), their centroid
 // A small core (at most 20 pixels) is then moved to the centre about which its halo is most
 // nearly point-symmetric; a core far larger than its sphere's median core (a mirror's disc
-// merged with the clipped scene beside it) is cut back to a disc of the median's size. Two moving spots in the circle (a glass ball's surface reflection
-// and its refracted hot spot) are reported (StackCalibration::two_spot_images); with two or
-// more spheres the spot whose direction agrees with the other spheres' is taken (a refracted
-// spot does not obey mirror geometry; SphereLight::spot_rank says which), with one sphere the
-// brightest.
+// merged with the clipped scene beside it) is cut back to a disc of the median's size. Two moving
+// spots in the circle (a glass ball's surface reflection and its refracted hot spot) are reported
+// (StackCalibration::two_spot_images); with two or more spheres the spot whose direction agrees
+// with the other spheres' is taken (a refracted spot does not obey mirror geometry;
+// SphereLight::spot_rank says which), with one sphere the brightest.
 #pragma once
 
 #include <filesystem>
