@@ -29,8 +29,8 @@ struct ErrorManager {
 }
 
 // Between setjmp and a possible longjmp: no C++ objects with destructors.
-bool encode(jpeg_compress_struct* cinfo, ErrorManager* err, std::FILE* file, int width,
-            int height, int channels, const unsigned char* pixels, int quality) {
+bool encode(jpeg_compress_struct* cinfo, ErrorManager* err, std::FILE* file, int width, int height,
+            int channels, const unsigned char* pixels, int quality) {
   if (setjmp(err->jump) != 0) return false;
   jpeg_create_compress(cinfo);
   jpeg_stdio_dest(cinfo, file);
@@ -43,8 +43,8 @@ bool encode(jpeg_compress_struct* cinfo, ErrorManager* err, std::FILE* file, int
   jpeg_start_compress(cinfo, TRUE);
   const std::size_t stride = static_cast<std::size_t>(width) * static_cast<std::size_t>(channels);
   while (cinfo->next_scanline < cinfo->image_height) {
-    auto* row = const_cast<JSAMPROW>(pixels + static_cast<std::size_t>(cinfo->next_scanline) *
-                                                  stride);
+    auto* row =
+        const_cast<JSAMPROW>(pixels + static_cast<std::size_t>(cinfo->next_scanline) * stride);
     jpeg_write_scanlines(cinfo, &row, 1);
   }
   jpeg_finish_compress(cinfo);
