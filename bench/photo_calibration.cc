@@ -6,7 +6,7 @@
 // highlight of its light, and each combined light direction.
 //
 //   photo_calibration WORK_DIR [PRESET[:SEED,SEED...] ...]
-//       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1
+//       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //
 // Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
 #include <algorithm>
@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> specs(argv + 2, argv + argc);
     if (specs.empty()) {
       specs = {"photo-dome:1,2,3", "photo-glass:1,2,3", "photo-chrome:1,2,3",
-               "photo-large-sphere:1"};
+               "photo-large-sphere:1,2,3"};
     }
     for (const std::string& spec : specs) {
       const auto colon = spec.find(':');
