@@ -26,8 +26,8 @@ constexpr double kSameConditionRelTol = 1e-6;
 constexpr double kLowRingsCoeffRelTol = 1e-4;
 // Relative coefficient errors against cond(A^T A) x float input rounding (6e-8), measured over
 // every solver and precision. 12 lights within 15 degrees of one direction: cond(A) = 650 gives
-// 0.025, this is 20 times that (measured worst 1e-5).
-constexpr double kConeCoeffRelTol = 0.5;
+// 0.025, the bound itself (measured worst 1e-5).
+constexpr double kConeCoeffRelTol = 0.025;
 // Exactly six lights (an interpolation): cond(A) = 24 gives 3.5e-5 (measured worst 3.6e-7).
 constexpr double kSixCoeffRelTol = 1e-4;
 // A dome with two lights 1e-7 apart: cond(A) = 5.1 gives 1.6e-6 (measured worst 1.5e-7).
