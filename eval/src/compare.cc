@@ -254,7 +254,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
   std::vector<HeldOutScore> held(ns);
   std::vector<TruthPsnr> truth_psnr(ns);
   std::vector<OutlierScores> outliers(ns);
-  std::vector<std::vector<double>> normal_angles(ns);
+  std::vector<NormalAngles> normal_angles(ns);
   std::vector<std::uint64_t> samples(ns), shadows(ns), highlights(ns);
   const std::vector<Fold> folds =
       test ? std::vector<Fold>{} : kfold_splits(report.lights, options.folds);
@@ -340,8 +340,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
         CoefficientMap tmap;
         CoefficientMapSink sink(&tmap);
         (void)fit::fit_images(band, cap.dirs, base_options(options, s), sink, &out);
-        append_normal_angles(out.normals, normals, mask.empty() ? nullptr : &mask,
-                             &normal_angles[k]);
+        normal_angles[k].add(out.normals, normals, mask.empty() ? nullptr : &mask);
         if (report.has_truth) {
           truth_psnr[k].add(psnr_against_truth(tmap, cap.dirs, *diffuse_rows, normals));
           outliers[k].add(outlier_scores(out.labels, band, *diffuse_rows, cap.dirs, normals, true));
@@ -387,7 +386,7 @@ CompareReport compare_solvers(const fs::path& capture_lp, const std::optional<fs
     r.shadow_fraction = static_cast<double>(shadows[k]) / total;
     r.highlight_fraction = static_cast<double>(highlights[k]) / total;
     if (truth) {
-      r.normals = normal_error_of(std::move(normal_angles[k]));
+      r.normals = normal_angles[k].result();
       if (report.has_truth) {
         r.truth_psnr_db = truth_psnr[k].psnr_db;
         r.outliers = outliers[k];

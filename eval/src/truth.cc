@@ -128,8 +128,10 @@ OutlierScores outlier_scores(const std::vector<std::uint8_t>& labels,
   return s;
 }
 
-void append_normal_angles(const Image& estimated, const Image& truth, const Image* mask,
-                          std::vector<double>* angles_deg) {
+NormalAngles::NormalAngles()
+    : bins_(static_cast<std::size_t>(std::lround(180.0 / kBinDeg)) + 1, 0) {}
+
+void NormalAngles::add(const Image& estimated, const Image& truth, const Image* mask) {
   require_same_size(estimated, truth.width(), truth.height(), "the estimated normal map");
   if (estimated.channels() < 3 || truth.channels() < 3)
     throw Error("evaluate: normal maps need 3 channels");
@@ -141,28 +143,39 @@ void append_normal_angles(const Image& estimated, const Image& truth, const Imag
       Eigen::Vector3d b(truth.at(x, y, 0), truth.at(x, y, 1), truth.at(x, y, 2));
       if (a.norm() < 1e-12 || b.norm() < 1e-12) continue;
       const double c = std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0);
-      angles_deg->push_back(std::acos(c) * 180.0 / M_PI);
+      const double deg = std::acos(c) * 180.0 / M_PI;
+      sum_deg_ += deg;
+      ++count_;
+      const auto bin = static_cast<std::size_t>(deg / kBinDeg);
+      ++bins_[std::min(bin, bins_.size() - 1)];
     }
   }
 }
 
-NormalError normal_error_of(std::vector<double> angles) {
+NormalError NormalAngles::result() const {
   NormalError e;
-  e.texels = angles.size();
-  if (angles.empty()) return e;
-  double sum = 0.0;
-  for (double a : angles) sum += a;
-  e.mean_deg = sum / static_cast<double>(angles.size());
-  const auto mid = angles.begin() + static_cast<std::ptrdiff_t>(angles.size() / 2);
-  std::nth_element(angles.begin(), mid, angles.end());
-  e.median_deg = *mid;
+  e.texels = count_;
+  if (count_ == 0) return e;
+  e.mean_deg = sum_deg_ / static_cast<double>(count_);
+  // The value of rank count / 2 (0-based), as the exact median took it.
+  const std::uint64_t rank = count_ / 2;
+  std::uint64_t below = 0;
+  for (std::size_t i = 0; i < bins_.size(); ++i) {
+    if (below + bins_[i] > rank) {
+      const double within =
+          (static_cast<double>(rank - below) + 0.5) / static_cast<double>(bins_[i]);
+      e.median_deg = (static_cast<double>(i) + within) * kBinDeg;
+      break;
+    }
+    below += bins_[i];
+  }
   return e;
 }
 
 NormalError normal_error(const Image& estimated, const Image& truth, const Image* mask) {
-  std::vector<double> angles;
-  append_normal_angles(estimated, truth, mask, &angles);
-  return normal_error_of(std::move(angles));
+  NormalAngles angles;
+  angles.add(estimated, truth, mask);
+  return angles.result();
 }
 
 }  // namespace ptmkit::eval

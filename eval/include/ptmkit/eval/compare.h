@@ -108,7 +108,8 @@ struct CompareReport {
 // Runs the comparison. Throws ptmkit::Error naming the file on an unreadable or mismatched
 // input (a light file, an image, a truth file), on invalid options, or when a fold's training
 // lights cannot be fitted. Streams the images band by band, like a fit (options.band_rows),
-// keeping besides the bands only the true normals' angles (8 bytes a texel, for their median).
+// in memory that does not grow with the texel count (the true normals' angles are gathered in
+// a fixed histogram, NormalAngles).
 [[nodiscard]] CompareReport compare_solvers(const std::filesystem::path& capture_lp,
                                             const std::optional<std::filesystem::path>& test_lp,
                                             const CompareOptions& options);

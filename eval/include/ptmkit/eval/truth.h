@@ -63,10 +63,23 @@ struct NormalError {
 // (optional, first channel > 0.5) is set.
 [[nodiscard]] NormalError normal_error(const Image& estimated, const Image& truth,
                                        const Image* mask = nullptr);
-// The angles behind normal_error, in degrees, texel by texel (row-major, masked and zero
-// normals skipped), to be gathered over bands; normal_error_of gives their mean and median.
-void append_normal_angles(const Image& estimated, const Image& truth, const Image* mask,
-                          std::vector<double>* angles_deg);
-[[nodiscard]] NormalError normal_error_of(std::vector<double> angles_deg);
+// normal_error gathered over bands of rows in fixed memory, whatever the texel count: the
+// mean is exact (summed in texel order, so bands give the whole map's sum), the median is
+// read from a histogram of 0.001-degree bins, interpolated by rank within its bin (within
+// 0.001 degree of the exact median; the same whatever the banding).
+class NormalAngles {
+ public:
+  NormalAngles();
+  // Adds the texels of one band (masked and zero normals skipped).
+  void add(const Image& estimated, const Image& truth, const Image* mask);
+  [[nodiscard]] NormalError result() const;
+
+  static constexpr double kBinDeg = 0.001;
+
+ private:
+  std::vector<std::uint64_t> bins_;
+  double sum_deg_ = 0.0;
+  std::uint64_t count_ = 0;
+};
 
 }  // namespace ptmkit::eval
