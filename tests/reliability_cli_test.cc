@@ -149,6 +149,33 @@ TEST(ReliabilityFullDisk, FitPtmAndRtiFailAndKeepTheEarlierFile) {
   EXPECT_TRUE(test::temporaries(dir.path()).empty());
 }
 
+// A folder of outputs written as a whole: a web export and a JPEG .ptm conversion on a full
+// disk leave the earlier folder and file as they were, a new one absent, and no staging
+// folder behind.
+TEST(ReliabilityFullDisk, ExportsFailAndKeepTheEarlierOutputs) {
+  test::ScratchDir dir;
+  const Capture c = make_capture(dir);
+  const fs::path web = dir / "web";
+  const test::RunResult first =
+      test::run_ptmkit({"export", "web", c.ptm.string(), "-o", web.string()});
+  ASSERT_EQ(first.exit_code, 0) << first.err;
+  const auto before = snapshot(web);
+  const fs::path jpeg = dir / "j.ptm";
+  spit(jpeg, "earlier ptm");
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"export", "web", c.ptm.string(), "-o", web.string(), "--quality",
+                                 "80"},
+        {"export", "web", c.ptm.string(), "-o", (dir / "fresh").string()},
+        {"export", "ptm", c.ptm.string(), "-o", jpeg.string(), "--format", "jpeg-rgb"}}) {
+    const test::LimitedRun r = run_limited(args, {.file_size_bytes = kFullDiskBytes});
+    EXPECT_EQ(r.exit_code, 1) << args[1] << " " << r.out;
+  }
+  EXPECT_EQ(snapshot(web), before);
+  EXPECT_FALSE(fs::exists(dir / "fresh"));
+  EXPECT_EQ(slurp(jpeg), "earlier ptm");
+  EXPECT_TRUE(test::temporaries(dir.path()).empty());
+}
+
 TEST(ReliabilityOutputs, FitCommitsThePtmOnlyWithItsMapsAndReport) {
   test::ScratchDir dir;
   const Capture c = make_capture(dir);

@@ -114,6 +114,24 @@ TEST(ReliabilityCommit, RemovesStaleTemporariesOfDeadProcessesOnly) {
   EXPECT_TRUE(fs::exists(dir / ".other.tmp"));
 }
 
+// A folder of outputs being staged (a web export, a .ptm8 container) by a run that was killed:
+// removed like a file, with what it holds; a live process's is kept.
+TEST(ReliabilityCommit, RemovesStaleTemporaryFoldersOfDeadProcesses) {
+  test::ScratchDir dir;
+  const fs::path dead = dir / (".ptmkit-tmp-" + std::to_string(dead_pid()) + "-3.web");
+  const fs::path alive = dir / (".ptmkit-tmp-" + std::to_string(::getppid()) + "-3.web");
+  for (const fs::path& d : {dead, alive}) {
+    fs::create_directories(d / "plane_0_files" / "0");
+    spit(d / "info.json", "{}");
+    spit(d / "plane_0_files" / "0" / "0_0.jpg", "partial");
+  }
+  const fs::path staged = temporary_path(dir.path(), ".web");
+  EXPECT_EQ(staged.parent_path(), dir.path());
+  EXPECT_EQ(staged.filename().string().rfind(std::string(kTempPrefix), 0), 0u);
+  EXPECT_FALSE(fs::exists(dead));
+  EXPECT_TRUE(fs::exists(alive / "info.json"));
+}
+
 TEST(ReliabilityCommit, WriteFailureOfATextOutputKeepsTheEarlierFile) {
   // A full disk for reports, light files and JSON: in a child whose file-size limit makes
   // the write fail (EFBIG, as ENOSPC on a full disk).

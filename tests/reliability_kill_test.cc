@@ -123,6 +123,18 @@ TEST(ReliabilityKill, RelightOutDirImagesAreOldOrNew) {
                  {"relight", ptm, "--lights", lp, "--out-dir", out, "--colour-space", "linear"});
 }
 
+// A web export replaces an earlier one as a whole: its folder is exchanged in one step.
+TEST(ReliabilityKill, WebExportFilesAreOldOrNew) {
+  test::ScratchDir dir;
+  const std::string lp = small_capture(dir / "cap");
+  ASSERT_FALSE(lp.empty());
+  const std::string ptm = (dir / "a.ptm").string();
+  ASSERT_EQ(test::run_ptmkit({"fit", lp, "-o", ptm}).exit_code, 0);
+  const std::string web = (dir / "web").string();
+  kill_and_check(dir.path(), {"web"}, {"export", "web", ptm, "-o", web, "--quality", "70"},
+                 {"export", "web", ptm, "-o", web, "--quality", "95"});
+}
+
 TEST(ReliabilityKill, SynthCaptureFilesAreOldOrNew) {
   test::ScratchDir dir;
   const std::string out = (dir / "cap").string();

@@ -146,11 +146,54 @@ int remove_stale_temporaries(const fs::path& dir) {
     }
     if (!process_gone(std::stol(name.substr(start, stop - start)))) continue;
     std::error_code ec2;
-    if (!it->is_symlink(ec2) && it->is_regular_file(ec2) && fs::remove(it->path(), ec2)) {
+    if (it->is_symlink(ec2)) continue;
+    if (it->is_regular_file(ec2) && fs::remove(it->path(), ec2)) {
       ++removed;
+    } else if (it->is_directory(ec2) && fs::remove_all(it->path(), ec2) > 0 && !ec2) {
+      ++removed;  // a folder of outputs a killed run was staging
     }
   }
   return removed;
+}
+
+void replace_folder(const fs::path& staged, const fs::path& target) {
+  std::error_code ec;
+  if (!fs::exists(target, ec)) {
+    if (::rename(staged.c_str(), target.c_str()) != 0) {
+      throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(errno));
+    }
+    sync_folder(folder_of(target));
+    return;
+  }
+  if (::renameat2(AT_FDCWD, staged.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
+    sync_folder(folder_of(target));
+    fs::remove_all(staged, ec);  // now the earlier folder
+    return;
+  }
+  if (errno != EINVAL && errno != ENOSYS) {
+    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
+  }
+  // No exchange on this file system: aside, then into place, putting it back on failure.
+  const fs::path aside = next_temp(folder_of(target), ".old");
+  if (::rename(target.c_str(), aside.c_str()) != 0) {
+    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
+  }
+  if (::rename(staged.c_str(), target.c_str()) != 0) {
+    const int err = errno;
+    (void)::rename(aside.c_str(), target.c_str());
+    throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(err));
+  }
+  sync_folder(folder_of(target));
+  fs::remove_all(aside, ec);
+}
+
+fs::path temporary_path(const fs::path& dir, std::string_view suffix) {
+  std::error_code ec;
+  {
+    std::lock_guard<std::mutex> lock(g_cleaned_mutex);
+    if (cleaned_dirs().insert(fs::absolute(dir, ec)).second) remove_stale_temporaries(dir);
+  }
+  return next_temp(dir, std::string(suffix));
 }
 
 AtomicOutput::AtomicOutput(fs::path target) : target_(std::move(target)) {

@@ -176,11 +176,8 @@ void write_ptm8(const fs::path& folder, const Ptm8Texture& t) {
   // once, even inside a transaction (the folder's rename is the commit).
   OutputTransaction::Immediate immediate;
   TempDir tmp;
-  std::string tmp_name = ".";
-  tmp_name += target.filename().string();
-  tmp_name += ".tmp";
-  tmp.path = parent / tmp_name;
-  fs::remove_all(tmp.path, ec);
+  // A recognisable name: what a killed run left goes with the next run writing here.
+  tmp.path = temporary_path(parent, ".ptm8");
   if (!fs::create_directory(tmp.path, ec))
     throw Error(where(tmp.path) + ": cannot create folder: " + ec.message());
   nlohmann::json j;
@@ -216,13 +213,11 @@ void write_ptm8(const fs::path& folder, const Ptm8Texture& t) {
     j["colour"] = "colour.png";
   }
   write_file_atomic(tmp.path / "manifest.json", j.dump(2) + "\n");
-  if (fs::exists(target, ec)) {
-    if (!fs::exists(target / "manifest.json", ec))
-      throw Error(where(target) + ": exists and is not a .ptm8 container; not replacing it");
-    fs::remove_all(target, ec);
+  if (fs::exists(target, ec) && !fs::exists(target / "manifest.json", ec)) {
+    throw Error(where(target) + ": exists and is not a .ptm8 container; not replacing it");
   }
-  fs::rename(tmp.path, target, ec);
-  if (ec) throw Error(where(target) + ": cannot move the container into place: " + ec.message());
+  // An earlier container is exchanged with the new one in one step (replace_folder).
+  replace_folder(tmp.path, target);
   tmp.keep = true;
 }
 

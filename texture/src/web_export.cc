@@ -10,7 +10,6 @@
 #include <cstdint>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <random>
 #include <sstream>
 
 #include "ptmkit/core/atomic_file.h"
@@ -92,11 +91,10 @@ class TempFolder {
  public:
   explicit TempFolder(const fs::path& target) : target_(target) {
     const fs::path parent = target.has_parent_path() ? target.parent_path() : fs::path(".");
-    std::random_device rd;
+    // A recognisable name: a run killed while staging leaves the folder, and the next run
+    // writing in `parent` removes it (remove_stale_temporaries).
     for (int attempt = 0; attempt < 100; ++attempt) {
-      std::ostringstream name;
-      name << "." << target.filename().string() << ".tmp-" << std::hex << rd();
-      const fs::path p = parent / name.str();
+      const fs::path p = temporary_path(parent, ".web");
       std::error_code ec;
       if (fs::create_directory(p, ec)) {
         path_ = p;
@@ -118,25 +116,11 @@ class TempFolder {
   TempFolder& operator=(const TempFolder&) = delete;
   [[nodiscard]] const fs::path& path() const { return path_; }
 
-  // Moves the folder into place. An existing target (checked by the caller to be an export)
-  // is renamed aside first and removed once the new folder is in place.
+  // Moves the folder into place; an existing target (checked by the caller to be an export)
+  // is exchanged with it in one step (replace_folder).
   void commit() {
-    std::error_code ec;
-    fs::path old;
-    if (fs::exists(target_, ec)) {
-      old = path_;
-      old += ".old";
-      fs::rename(target_, old, ec);
-      if (ec) throw Error(where(target_) + ": cannot replace the existing export: " + ec.message());
-    }
-    fs::rename(path_, target_, ec);
-    if (ec) {
-      std::error_code ec2;
-      if (!old.empty()) fs::rename(old, target_, ec2);
-      throw Error(where(target_) + ": cannot move the export into place: " + ec.message());
-    }
+    replace_folder(path_, target_);
     path_.clear();
-    if (!old.empty()) fs::remove_all(old, ec);
   }
 
  private:

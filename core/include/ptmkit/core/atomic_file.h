@@ -89,8 +89,24 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view conte
 // fails.
 void ensure_directory(const std::filesystem::path& dir);
 
-// Removes `.ptmkit-tmp-PID-*` files in `dir` whose process PID is gone (what a killed run left).
-// Returns how many it removed. AtomicOutput calls it once per folder and process.
+// Removes `.ptmkit-tmp-PID-*` files and folders in `dir` whose process PID is gone (what a
+// killed run left). Returns how many it removed. AtomicOutput and temporary_path call it once
+// per folder and process.
 int remove_stale_temporaries(const std::filesystem::path& dir);
+
+// A fresh temporary name in `dir`, `.ptmkit-tmp-PID-N-HOST` + `suffix`, for a writer that
+// stages something other than one file (a folder of outputs); stale ones in `dir` are removed
+// first, as by AtomicOutput.
+[[nodiscard]] std::filesystem::path temporary_path(const std::filesystem::path& dir,
+                                                   std::string_view suffix);
+
+// Puts a staged folder in place of `target` (a folder of outputs, or nothing yet) in one step:
+// an existing target is exchanged with the staged folder atomically (Linux renameat2
+// RENAME_EXCHANGE; on a file system without it, renamed aside first and put back on failure),
+// then removed from its temporary name. So every path inside `target` holds the earlier or
+// the new content whatever happens; a kill after the exchange leaves the earlier folder under
+// the staged folder's temporary name, removed by the next run (remove_stale_temporaries).
+// Throws ptmkit::Error naming `target`.
+void replace_folder(const std::filesystem::path& staged, const std::filesystem::path& target);
 
 }  // namespace ptmkit
