@@ -77,13 +77,8 @@ using detail::fit_circle;
 using detail::luma_at;
 
 double bilinear(const cv::Mat& m, double x, double y) {
-  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-  if (x0 < 0 || y0 < 0 || x0 + 1 >= m.cols || y0 + 1 >= m.rows) return 0.0;
-  const double fx = x - x0, fy = y - y0;
-  const float* r0 = m.ptr<float>(y0);
-  const float* r1 = m.ptr<float>(y0 + 1);
-  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
-         fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  double v = 0.0;
+  return detail::bilinear_at(m, x, y, &v) ? v : 0.0;
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // circle fitting and refinement, a pixel's luma, drawings as images; not public.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <vector>
 
@@ -18,6 +19,19 @@ namespace ptmkit::calib::detail {
 inline double luma_at(ConstImageViewF img, int x, int y) {
   const float* p = img.row(y) + static_cast<std::ptrdiff_t>(x) * img.channels;
   return img.channels >= 3 ? luma(p[0], p[1], p[2]) : p[0];
+}
+
+// Bilinear value of a CV_32F plane at (x, y); false (and *v untouched) where the 2 x 2
+// neighbourhood leaves the plane.
+inline bool bilinear_at(const cv::Mat& m, double x, double y, double* v) {
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= m.cols || y0 + 1 >= m.rows) return false;
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = m.ptr<float>(y0);
+  const float* r1 = m.ptr<float>(y0 + 1);
+  *v =
+      (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  return true;
 }
 
 // Geometric least-squares circle through points: algebraic (Kasa) start, Gauss-Newton on

@@ -1,6 +1,7 @@
 #include "ptmkit/calib/sphere_stack.h"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
@@ -10,7 +11,6 @@
 #include <optional>
 
 #include <tbb/parallel_for.h>
-#include <Eigen/LU>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -26,6 +26,7 @@ namespace ptmkit::calib {
 namespace {
 
 using namespace stack_detail;  // NOLINT: the passes of this one search
+using detail::bilinear_at;
 
 // ---- Highlights at full resolution. --------------------------------------------------------
 
@@ -66,18 +67,6 @@ void shape(const std::vector<Eigen::Vector3d>& samples, Located* out) {
   out->ok = true;
 }
 
-// Brightness above the median at a sub-pixel point (window pixels), bilinear; false outside.
-bool lift_at(const cv::Mat& lift, double x, double y, double* v) {
-  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-  if (x0 < 0 || y0 < 0 || x0 + 1 >= lift.cols || y0 + 1 >= lift.rows) return false;
-  const double fx = x - x0, fy = y - y0;
-  const float* r0 = lift.ptr<float>(y0);
-  const float* r1 = lift.ptr<float>(y0 + 1);
-  *v =
-      (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
-  return true;
-}
-
 // The centre about which the highlight's brightness (above the stack's median) is most nearly
 // point-symmetric: Gauss-Newton on sum_p (L(p) - L(2c - p))^2 over the pixels p within
 // `radius` of the start. A light's highlight on a sphere is symmetric about its centre to
@@ -111,9 +100,11 @@ Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& sta
         continue;
       }
       double vp = 0, vq = 0, xm = 0, xp = 0, ym = 0, yp = 0;
-      if (!lift_at(lift, p.x(), p.y(), &vp) || !lift_at(lift, q.x(), q.y(), &vq) ||
-          !lift_at(lift, q.x() - 0.5, q.y(), &xm) || !lift_at(lift, q.x() + 0.5, q.y(), &xp) ||
-          !lift_at(lift, q.x(), q.y() - 0.5, &ym) || !lift_at(lift, q.x(), q.y() + 0.5, &yp)) {
+      if (!bilinear_at(lift, p.x(), p.y(), &vp) || !bilinear_at(lift, q.x(), q.y(), &vq) ||
+          !bilinear_at(lift, q.x() - 0.5, q.y(), &xm) ||
+          !bilinear_at(lift, q.x() + 0.5, q.y(), &xp) ||
+          !bilinear_at(lift, q.x(), q.y() - 0.5, &ym) ||
+          !bilinear_at(lift, q.x(), q.y() + 0.5, &yp)) {
         continue;
       }
       const Eigen::Vector2d j = -2.0 * Eigen::Vector2d(xp - xm, yp - ym);  // d r / d c
@@ -203,30 +194,21 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r) {
       region->at<std::uint8_t>(static_cast<int>(p.y()), static_cast<int>(p.x())) = 0;
     }
   }
-  // The centre to a fraction of a pixel: a circle (centre and radius) fitted by Gauss-Newton
-  // to the boundary pixels on the disc's circle; the merged side has none there.
+  // The centre to a fraction of a pixel: a circle fitted (fit_circle) to the boundary pixels
+  // on the disc's circle; the merged side has none there.
   std::vector<Eigen::Vector2d> arc;
   for (const Eigen::Vector2d& b : boundary) {
     if (std::abs((b - best_c).norm() - r) < 1.0) arc.push_back(b);
   }
   if (arc.size() < 8) return {};
-  Eigen::Vector3d p(best_c.x(), best_c.y(), r - 0.5);  // boundary pixel centres lie inside
-  for (int it = 0; it < 20; ++it) {
-    Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
-    for (const Eigen::Vector2d& b : arc) {
-      const Eigen::Vector2d d = b - p.head<2>();
-      const double n = std::max(1e-9, d.norm());
-      const Eigen::Vector3d j(-d.x() / n, -d.y() / n, -1.0);
-      jtj += j * j.transpose();
-      jtr += j * (n - p.z());
-    }
-    const Eigen::Vector3d step = -jtj.inverse() * jtr;
-    p += step;
-    if (step.norm() < 1e-5) break;
+  Circle fitted;
+  try {
+    fitted = detail::fit_circle(arc);
+  } catch (const Error&) {
+    return {};
   }
-  if (!p.allFinite() || (p.head<2>() - best_c).norm() > 1.5) return {};
-  return Eigen::Vector2d(p.x(), p.y());
+  if ((fitted.centre_px - best_c).norm() > 1.5) return {};
+  return fitted.centre_px;
 }
 
 // The highlight in a window (photo pixels), `base` the stack's median there (same size),
@@ -526,18 +508,24 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         }
       }
       if (!ambiguous) continue;
-      auto direction = [&](std::size_t k, int r) {
-        const Eigen::Vector2d px = spots_of[k][ii][static_cast<std::size_t>(r)].centre_small * s +
-                                   Eigen::Vector2d::Constant(0.5 * (s - 1));
-        return reflect_highlight(circles[k], det.camera, px, ev.w, ev.h);
-      };
+      // Each sphere's direction for its first and second spot, once.
+      std::vector<std::array<Eigen::Vector3d, 2>> dir(k_spheres);
+      for (std::size_t k = 0; k < k_spheres; ++k) {
+        for (int r = 0; r < choices[k]; ++r) {
+          const Eigen::Vector2d px = spots_of[k][ii][static_cast<std::size_t>(r)].centre_small * s +
+                                     Eigen::Vector2d::Constant(0.5 * (s - 1));
+          dir[k][static_cast<std::size_t>(r)] =
+              reflect_highlight(circles[k], det.camera, px, ev.w, ev.h);
+        }
+      }
       // Every combination (at most 2^4), scored by the sum of pairwise angles (degrees).
       auto cost = [&](const std::vector<int>& pick) {
         double sum = 0.0;
         for (std::size_t a = 0; a < k_spheres; ++a) {
           for (std::size_t b = a + 1; b < k_spheres; ++b) {
             if (choices[a] == 0 || choices[b] == 0) continue;
-            const double c = direction(a, pick[a]).dot(direction(b, pick[b]));
+            const double c = dir[a][static_cast<std::size_t>(pick[a])].dot(
+                dir[b][static_cast<std::size_t>(pick[b])]);
             sum += std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / std::numbers::pi;
           }
         }

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ptmkit/core/error.h"
@@ -124,6 +125,45 @@ bool process_gone(long pid) {
   return ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
 }
 
+// Removes stale temporaries in `dir` the first time this process writes there.
+void clean_once(const fs::path& dir) {
+  std::error_code ec;
+  std::lock_guard<std::mutex> lock(g_cleaned_mutex);
+  if (cleaned_dirs().insert(fs::absolute(dir, ec)).second) remove_stale_temporaries(dir);
+}
+
+// StagedFolder::commit: `staged` in place of `target` in one step (see atomic_file.h).
+void replace_folder(const fs::path& staged, const fs::path& target) {
+  std::error_code ec;
+  if (!fs::exists(target, ec)) {
+    if (::rename(staged.c_str(), target.c_str()) != 0) {
+      throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(errno));
+    }
+    sync_folder(folder_of(target));
+    return;
+  }
+  if (::renameat2(AT_FDCWD, staged.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
+    sync_folder(folder_of(target));
+    fs::remove_all(staged, ec);  // now the earlier folder
+    return;
+  }
+  if (errno != EINVAL && errno != ENOSYS) {
+    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
+  }
+  // No exchange on this file system: aside, then into place, putting it back on failure.
+  const fs::path aside = next_temp(folder_of(target), ".old");
+  if (::rename(target.c_str(), aside.c_str()) != 0) {
+    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
+  }
+  if (::rename(staged.c_str(), target.c_str()) != 0) {
+    const int err = errno;
+    (void)::rename(aside.c_str(), target.c_str());
+    throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(err));
+  }
+  sync_folder(folder_of(target));
+  fs::remove_all(aside, ec);
+}
+
 }  // namespace
 
 int remove_stale_temporaries(const fs::path& dir) {
@@ -156,44 +196,33 @@ int remove_stale_temporaries(const fs::path& dir) {
   return removed;
 }
 
-void replace_folder(const fs::path& staged, const fs::path& target) {
-  std::error_code ec;
-  if (!fs::exists(target, ec)) {
-    if (::rename(staged.c_str(), target.c_str()) != 0) {
-      throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(errno));
-    }
-    sync_folder(folder_of(target));
-    return;
-  }
-  if (::renameat2(AT_FDCWD, staged.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
-    sync_folder(folder_of(target));
-    fs::remove_all(staged, ec);  // now the earlier folder
-    return;
-  }
-  if (errno != EINVAL && errno != ENOSYS) {
-    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
-  }
-  // No exchange on this file system: aside, then into place, putting it back on failure.
-  const fs::path aside = next_temp(folder_of(target), ".old");
-  if (::rename(target.c_str(), aside.c_str()) != 0) {
-    throw Error(where(target) + ": cannot replace the folder: " + std::strerror(errno));
-  }
-  if (::rename(staged.c_str(), target.c_str()) != 0) {
-    const int err = errno;
-    (void)::rename(aside.c_str(), target.c_str());
-    throw Error(where(target) + ": cannot move the folder into place: " + std::strerror(err));
-  }
-  sync_folder(folder_of(target));
-  fs::remove_all(aside, ec);
+fs::path temporary_path(const fs::path& dir, std::string_view suffix) {
+  clean_once(dir);
+  return next_temp(dir, std::string(suffix));
 }
 
-fs::path temporary_path(const fs::path& dir, std::string_view suffix) {
+StagedFolder::StagedFolder(fs::path target, std::string_view suffix) : target_(std::move(target)) {
+  if (target_.filename().empty()) target_ = target_.parent_path();  // "out/" names "out"
+  const fs::path dir = folder_of(target_);
   std::error_code ec;
-  {
-    std::lock_guard<std::mutex> lock(g_cleaned_mutex);
-    if (cleaned_dirs().insert(fs::absolute(dir, ec)).second) remove_stale_temporaries(dir);
+  if (!fs::is_directory(dir, ec)) throw Error(where(dir) + ": no such folder");
+  path_ = temporary_path(dir, suffix);
+  if (!fs::create_directory(path_, ec)) {
+    const fs::path p = std::exchange(path_, fs::path());
+    throw Error(where(p) + ": cannot create a temporary folder: " + ec.message());
   }
-  return next_temp(dir, std::string(suffix));
+}
+
+StagedFolder::~StagedFolder() {
+  if (!path_.empty()) {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+}
+
+void StagedFolder::commit() {
+  replace_folder(path_, target_);
+  path_.clear();
 }
 
 AtomicOutput::AtomicOutput(fs::path target) : target_(std::move(target)) {
@@ -221,10 +250,7 @@ AtomicOutput::AtomicOutput(fs::path target) : target_(std::move(target)) {
   if (!fs::is_directory(dir, ec)) {
     throw Error(where(target_) + ": the folder " + dir.string() + " does not exist");
   }
-  {
-    std::lock_guard<std::mutex> lock(g_cleaned_mutex);
-    if (cleaned_dirs().insert(fs::absolute(dir, ec)).second) remove_stale_temporaries(dir);
-  }
+  clean_once(dir);
   temp_ = next_temp(dir, resolved_.extension().string());
 }
 

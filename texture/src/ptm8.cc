@@ -153,33 +153,18 @@ void image_to_bytes(const Image& img, std::vector<std::uint8_t>& dst, int stride
       dst[i * stride + offset + c] = to_byte(img.data()[i * ch + c] * 255.0);
 }
 
-// Removes a temporary folder unless released.
-struct TempDir {
-  fs::path path;
-  bool keep = false;
-  ~TempDir() {
-    std::error_code ec;
-    if (!keep && !path.empty()) fs::remove_all(path, ec);
-  }
-};
-
 }  // namespace
 
 void write_ptm8(const fs::path& folder, const Ptm8Texture& t) {
   if (t.width <= 0 || t.height <= 0) throw Error(where(folder) + ": empty texture");
   fs::path target = folder;
   if (target.filename().empty()) target = target.parent_path();
-  const fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   std::error_code ec;
-  if (!fs::is_directory(parent, ec)) throw Error(where(parent) + ": no such folder");
-  // The files are assembled in a temporary folder that is then renamed: they must exist at
-  // once, even inside a transaction (the folder's rename is the commit).
-  OutputTransaction::Immediate immediate;
-  TempDir tmp;
-  // A recognisable name: what a killed run left goes with the next run writing here.
-  tmp.path = temporary_path(parent, ".ptm8");
-  if (!fs::create_directory(tmp.path, ec))
-    throw Error(where(tmp.path) + ": cannot create folder: " + ec.message());
+  if (fs::exists(target, ec) && !fs::exists(target / "manifest.json", ec)) {
+    throw Error(where(target) + ": exists and is not a .ptm8 container; not replacing it");
+  }
+  // The files are assembled in a staged folder, put in place as a whole at the end.
+  StagedFolder tmp(target, ".ptm8");
   nlohmann::json j;
   j["format"] = "ptmkit-ptm8";
   j["version"] = 1;
@@ -199,26 +184,21 @@ void write_ptm8(const fs::path& folder, const Ptm8Texture& t) {
     std::string b = a;
     a += "_a012.png";
     b += "_a345.png";
-    write_image(tmp.path / a,
+    write_image(tmp.path() / a,
                 bytes_to_image(t.coeffs, t.width, t.height, np * kPtmTerms, p * kPtmTerms).view(),
                 wo);
     write_image(
-        tmp.path / b,
+        tmp.path() / b,
         bytes_to_image(t.coeffs, t.width, t.height, np * kPtmTerms, p * kPtmTerms + 3).view(), wo);
     j["planes"].push_back({{"a012", a}, {"a345", b}});
   }
   if (t.model == ColourModel::kLRGB) {
-    write_image(tmp.path / "colour.png", bytes_to_image(t.colour, t.width, t.height, 3, 0).view(),
+    write_image(tmp.path() / "colour.png", bytes_to_image(t.colour, t.width, t.height, 3, 0).view(),
                 wo);
     j["colour"] = "colour.png";
   }
-  write_file_atomic(tmp.path / "manifest.json", j.dump(2) + "\n");
-  if (fs::exists(target, ec) && !fs::exists(target / "manifest.json", ec)) {
-    throw Error(where(target) + ": exists and is not a .ptm8 container; not replacing it");
-  }
-  // An earlier container is exchanged with the new one in one step (replace_folder).
-  replace_folder(tmp.path, target);
-  tmp.keep = true;
+  write_file_atomic(tmp.path() / "manifest.json", j.dump(2) + "\n");
+  tmp.commit();
 }
 
 Ptm8Texture read_ptm8(const fs::path& folder) {

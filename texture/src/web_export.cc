@@ -84,51 +84,6 @@ namespace {
 
 // --- the folder ------------------------------------------------------------------------
 
-// A temporary folder beside the target, removed unless committed. The files written into it
-// must exist at once, even inside the command's OutputTransaction: renaming the folder is
-// what commits them.
-class TempFolder {
- public:
-  explicit TempFolder(const fs::path& target) : target_(target) {
-    const fs::path parent = target.has_parent_path() ? target.parent_path() : fs::path(".");
-    // A recognisable name: a run killed while staging leaves the folder, and the next run
-    // writing in `parent` removes it (remove_stale_temporaries).
-    for (int attempt = 0; attempt < 100; ++attempt) {
-      const fs::path p = temporary_path(parent, ".web");
-      std::error_code ec;
-      if (fs::create_directory(p, ec)) {
-        path_ = p;
-        return;
-      }
-      if (ec && ec != std::errc::file_exists) {
-        throw Error(where(parent) + ": cannot create a temporary folder: " + ec.message());
-      }
-    }
-    throw Error(where(parent) + ": cannot create a temporary folder");
-  }
-  ~TempFolder() {
-    if (!path_.empty()) {
-      std::error_code ec;
-      fs::remove_all(path_, ec);
-    }
-  }
-  TempFolder(const TempFolder&) = delete;
-  TempFolder& operator=(const TempFolder&) = delete;
-  [[nodiscard]] const fs::path& path() const { return path_; }
-
-  // Moves the folder into place; an existing target (checked by the caller to be an export)
-  // is exchanged with it in one step (replace_folder).
-  void commit() {
-    replace_folder(path_, target_);
-    path_.clear();
-  }
-
- private:
-  OutputTransaction::Immediate immediate_;
-  fs::path target_;
-  fs::path path_;
-};
-
 struct Writer {
   fs::path root;
   std::size_t files = 0;
@@ -238,7 +193,7 @@ WebExportReport export_planes(const PlaneSource& src, const fs::path& dir,
         std::max(report.max_quantisation_error, 0.5 * report.scale[k] / 255.0);
   }
 
-  TempFolder temp(dir);
+  StagedFolder temp(dir, ".web");
   Writer out{temp.path()};
   const bool ycbcr = options.jpeg_colour == WebJpegColour::kAuto
                          ? src.colorspace == "rgb"

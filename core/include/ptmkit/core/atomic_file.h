@@ -94,19 +94,34 @@ void ensure_directory(const std::filesystem::path& dir);
 // per folder and process.
 int remove_stale_temporaries(const std::filesystem::path& dir);
 
-// A fresh temporary name in `dir`, `.ptmkit-tmp-PID-N-HOST` + `suffix`, for a writer that
-// stages something other than one file (a folder of outputs); stale ones in `dir` are removed
-// first, as by AtomicOutput.
+// A fresh temporary name in `dir`, `.ptmkit-tmp-PID-N-HOST` + `suffix`; stale ones in `dir`
+// are removed first, as by AtomicOutput.
 [[nodiscard]] std::filesystem::path temporary_path(const std::filesystem::path& dir,
                                                    std::string_view suffix);
 
-// Puts a staged folder in place of `target` (a folder of outputs, or nothing yet) in one step:
-// an existing target is exchanged with the staged folder atomically (Linux renameat2
-// RENAME_EXCHANGE; on a file system without it, renamed aside first and put back on failure),
-// then removed from its temporary name. So every path inside `target` holds the earlier or
-// the new content whatever happens; a kill after the exchange leaves the earlier folder under
-// the staged folder's temporary name, removed by the next run (remove_stale_temporaries).
-// Throws ptmkit::Error naming `target`.
-void replace_folder(const std::filesystem::path& staged, const std::filesystem::path& target);
+// An output that is a folder as a whole (a web export, a .ptm8 container), staged in a
+// temporary folder beside `target` (`temporary_path(..., suffix)`), whose files exist at once
+// even inside an OutputTransaction. commit() puts it in place of `target` in one step: an
+// existing target is exchanged with it atomically (Linux renameat2 RENAME_EXCHANGE; on a
+// file system without it, renamed aside first and put back on failure), then removed from
+// the temporary name. Every path inside `target` holds the earlier or the new content
+// whatever happens; what a kill leaves under the temporary name goes with the next run
+// writing there (remove_stale_temporaries). Not committed, the staged folder is removed.
+// Errors are ptmkit::Error naming the folder.
+class StagedFolder {
+ public:
+  StagedFolder(std::filesystem::path target, std::string_view suffix);
+  ~StagedFolder();
+  StagedFolder(const StagedFolder&) = delete;
+  StagedFolder& operator=(const StagedFolder&) = delete;
+
+  [[nodiscard]] const std::filesystem::path& path() const { return path_; }
+  void commit();
+
+ private:
+  OutputTransaction::Immediate immediate_;
+  std::filesystem::path target_;
+  std::filesystem::path path_;
+};
 
 }  // namespace ptmkit
