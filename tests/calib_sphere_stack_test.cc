@@ -38,6 +38,14 @@ constexpr double kPhotoDomeEightLightsMeanDeg = 0.3;
 // The photo-chrome test's worst highlight: measured 1.0 px; 2.9 px when a core merged with
 // the clipped scene beside it is taken whole.
 constexpr double kPhotoChromeWorstHighlightPx = 1.5;
+// photo-large-sphere seed 2's circle: measured 0.58 px (14.7 px when the rim refinement
+// stops after one pass); the faint rim against the dark room pulls it inward by up to a
+// pixel, so the 0.5 px target is not met here (docs/CALIBRATION.md).
+constexpr double kLargeSphereCentrePx = 1.0;
+// A light's core merged with a static clipped reflection: measured 1.32 px (0.94 px for the
+// same light without the reflection); refused as "not a compact highlight" when the merged
+// region is taken whole.
+constexpr double kMergedWithStaticHighlightPx = 1.5;
 // A candidate scoring below the default --min-score (0.5) is never taken (docs/CALIBRATION.md).
 constexpr double kMinScore = 0.5;
 // uw-psm's circle found without a hint against the mask's: measured 0.97 px apart (its lower
@@ -517,6 +525,76 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
   }
   std::printf("photo-chrome highlights: worst %.3f px\n", worst);
   EXPECT_LE(worst, kPhotoChromeWorstHighlightPx);
+}
+
+// One black glossy sphere filling most of the frame, its top cut by the frame and its bottom
+// hidden by the pedestal, in a dark room: the first circles proposed are well off, and rays
+// cast from a centre that far off cross the rim obliquely; the refinement is repeated from
+// its own result until the rim stops gaining support.
+TEST(CalibSphereStack, PhotoLargeSphereInADarkRoomIsFound) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-large-sphere");
+  po.seed = 2;
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("large" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 1u);
+  const Circle& c = r.rig.spheres[0].sphere;
+  const synth::SphereOutline& t = truth.spheres[0].outline;
+  const double off = (c.centre_px - t.centre_px).norm();
+  const double rel = std::abs(c.radius_px - t.radius_px) / t.radius_px;
+  std::printf("large sphere: centre off %.3f px, radius off %.3f%%\n", off, 100.0 * rel);
+  EXPECT_LE(off, kLargeSphereCentrePx);
+  EXPECT_LE(rel, kRadiusTargetRel);
+}
+
+// A static reflection clipped in every image (a window or a lamp mirrored in the chrome),
+// thicker than the light's core and touching it in one image: the clipped region there is
+// mostly the reflection. The light's core is still the part that is not clipped in the
+// stack's median, and its centre is found from its own edge.
+TEST(CalibSphereStack, ACoreMergedWithAStaticClippedReflectionIsCutFromIt) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-chrome");
+  po.lights = "rings:15:3,40:3,65:2";
+  const synth::PhotoRenderer renderer(po);
+  const synth::PhotoTruth truth = renderer.truth();
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
+    images.push_back(renderer.render(static_cast<int>(i)));
+    names.emplace_back("chrome" + std::to_string(i) + ".jpg");
+  }
+  const int target = 4;
+  const synth::PhotoSphereTruth& s0 = truth.spheres[0];
+  ASSERT_TRUE(s0.highlight_px[target].has_value());
+  // The reflection: a clipped disc of radius 6 px (the light's core is about 4), overlapping
+  // the core by about a pixel on the side toward the sphere's centre, in every image.
+  const Eigen::Vector2d toward = (s0.outline.centre_px - *s0.highlight_px[target]).normalized();
+  const Eigen::Vector2d blob = *s0.highlight_px[target] + 9.0 * toward;
+  for (Image& img : images) {
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - blob).norm() > 6.0) continue;
+        for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = 1.0f;
+      }
+    }
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = po.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  const SphereLight& l = r.rig.spheres[0].lights[target];
+  ASSERT_TRUE(l.found) << l.flag;
+  const double off = (l.highlight_px - *s0.highlight_px[target]).norm();
+  std::printf("core beside a static clipped reflection: %.3f px from the mirror highlight\n", off);
+  EXPECT_LT(off, kMergedWithStaticHighlightPx);
 }
 
 std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {

@@ -42,6 +42,9 @@ struct Located {
   int pixels = 0;  // the core's (saturated) or the spot's pixels
   double major = 0.0, minor = 0.0, angle_deg = 0.0;
   bool ok = false;
+  // The clipped region reaches pixels clipped in the stack's median too: a static
+  // reflection (a window, a lamp) clipped in every image, merged with the light's core.
+  bool touches_static = false;
 };
 
 void shape(const std::vector<Eigen::Vector3d>& samples, Located* out) {
@@ -140,11 +143,16 @@ constexpr double kMergedCoreRatio = 1.25;
 
 // A clipped region much larger than the sphere's usual core: the light's image merged with
 // something else clipped beside it (on a mirror sphere, the lit scene mirrored next to the
-// light). The light's image is a disc of the usual radius `r`: the disc, lying inside the
-// region, on whose circle most of the region's boundary pixels lie; the region is cut to it
-// (plus a pixel and a half), so the core's centroid sees the disc alone, the cut side
-// weighted as a clipped edge (mirrored from the opposite side).
-std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r) {
+// light, or a static reflection clipped in every image). The light's image is a disc of the
+// usual radius `r`: the disc, lying inside the region, on whose circle most of the region's
+// boundary pixels lie; the region is cut to it (plus a pixel and a half), so the core's
+// centroid sees the disc alone, the cut side weighted as a clipped edge (mirrored from the
+// opposite side). `light_edge` (window pixels) tells the boundary pixels that can be the
+// light's edge; `merged` says the region is known to hold more than the light (else a
+// region not much larger than the disc is left as it is).
+std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
+                                           const std::function<bool(int, int)>& light_edge,
+                                           bool merged) {
   const cv::Mat& m = *region;
   std::vector<Eigen::Vector2d> boundary, inner;
   for (int y = 0; y < m.rows; ++y) {
@@ -154,11 +162,11 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r) {
       const bool edge = x == 0 || y == 0 || x + 1 == m.cols || y + 1 == m.rows ||
                         !m.at<std::uint8_t>(y, x - 1) || !m.at<std::uint8_t>(y, x + 1) ||
                         !m.at<std::uint8_t>(y - 1, x) || !m.at<std::uint8_t>(y + 1, x);
-      if (edge) boundary.emplace_back(x, y);
+      if (edge && light_edge(x, y)) boundary.emplace_back(x, y);
     }
   }
   const double disc_area = std::numbers::pi * r * r;
-  if (static_cast<double>(inner.size()) < kMergedCoreRatio * disc_area) return {};  // not merged
+  if (!merged && static_cast<double>(inner.size()) < kMergedCoreRatio * disc_area) return {};
   double best_score = -1.0;
   Eigen::Vector2d best_c(0.0, 0.0);
   for (const Eigen::Vector2d& p : inner) {
@@ -253,10 +261,20 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     }
     cv::Mat labels;
     const int k = cv::connectedComponents(clipped, labels, 8, CV_32S);
+    // Pixels clipped in the stack's median as well: a static reflection, not the light's.
+    auto static_clip = [&](int x, int y) { return base.at<float>(y, x) >= 0.9 * top; };
     // The light's clipped component is the thickest (a streak may be longer, never thicker):
-    // the largest inscribed radius, then the larger area.
+    // the largest inscribed radius, then the larger area. Thickness counts the pixels that
+    // are not clipped in the median: a static reflection clipped in every image is no
+    // light's core, however thick.
+    cv::Mat moving = clipped.clone();
+    for (int y = 0; y < l.rows; ++y) {
+      for (int x = 0; x < l.cols; ++x) {
+        if (static_clip(x, y)) moving.at<std::uint8_t>(y, x) = 0;
+      }
+    }
     cv::Mat cpad, cdist;
-    cv::copyMakeBorder(clipped, cpad, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::copyMakeBorder(moving, cpad, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
     cv::distanceTransform(cpad, cdist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
     std::vector<int> area(static_cast<std::size_t>(k), 0);
     std::vector<float> depth(static_cast<std::size_t>(k), 0.0f);
@@ -276,7 +294,31 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
       }
     }
     cv::Mat region = labels == best;
-    if (core_radius_hint > 0.0) disc_centre = cut_to_disc(&region, core_radius_hint);
+    for (int y = 0; y < l.rows && !out.touches_static; ++y) {
+      for (int x = 0; x < l.cols; ++x) {
+        if (region.at<std::uint8_t>(y, x) && static_clip(x, y)) {
+          out.touches_static = true;
+          break;
+        }
+      }
+    }
+    if (core_radius_hint > 0.0) {
+      // Beside a static clipped reflection, only a boundary pixel with an unclipped
+      // neighbour lit above the median (the light's halo) is the light's edge.
+      auto light_edge = [&](int x, int y) {
+        if (!out.touches_static) return true;
+        constexpr int kDx[4] = {1, -1, 0, 0}, kDy[4] = {0, 0, 1, -1};
+        for (int d = 0; d < 4; ++d) {
+          const int nx = x + kDx[d], ny = y + kDy[d];
+          if (nx < 0 || ny < 0 || nx >= l.cols || ny >= l.rows || region.at<std::uint8_t>(ny, nx))
+            continue;
+          const double b = base.at<float>(ny, nx);
+          if (l.at<float>(ny, nx) - b >= 0.25 * (top - b) && !static_clip(nx, ny)) return true;
+        }
+        return false;
+      };
+      disc_centre = cut_to_disc(&region, core_radius_hint, light_edge, out.touches_static);
+    }
     cv::Mat padded;
     cv::copyMakeBorder(region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
     cv::Mat dist;
@@ -317,7 +359,9 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
                                             : Eigen::Vector2d(deep.x - 1, deep.y - 1);
     auto edge_weight = [&](int x, int y) {
       const double v = l.at<float>(y, x) - base.at<float>(y, x);
-      return std::clamp(v / (0.98 * top - base.at<float>(y, x)), 0.0, 1.0);
+      const double room = 0.98 * top - base.at<float>(y, x);
+      // Where the median itself is (nearly) clipped, the image says nothing of the light.
+      return room > 1e-3 ? std::clamp(v / room, 0.0, 1.0) : 0.0;
     };
     for (int y = 0; y < l.rows; ++y) {
       for (int x = 0; x < l.cols; ++x) {
@@ -649,7 +693,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     if (median < kMergedCoreMinPixels) continue;  // small cores: no disc to fit
     for (std::size_t q = 0; q < wants.size(); ++q) {
       if (static_cast<std::size_t>(wants[q].sphere) != k || !located[q].ok ||
-          !located[q].saturated || located[q].pixels < kMergedCoreRatio * median) {
+          !located[q].saturated ||
+          (located[q].pixels < kMergedCoreRatio * median && !located[q].touches_static)) {
         continue;
       }
       located[q] = locate(windows[q], bases[q], inside_of(q), std::sqrt(median / std::numbers::pi));

@@ -269,6 +269,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
   if (!boxes) regions.emplace_back(0, 0, ev.sw, ev.sh);
   std::vector<SphereCandidate> all;
   std::vector<int> region_of;
+  std::vector<double> refined_rim;  // per candidate: its refinement's rim support
   for (std::size_t g = 0; g < regions.size(); ++g) {
     const cv::Rect& reg = regions[g];
     std::vector<Circle> raw;
@@ -282,36 +283,64 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
     for (const Circle& rough : raw) {
       // Refined on the stretched composites' edge. What stays still (the median, the
       // reference photo) comes first: the maximum and mean also hold the moving highlights'
-      // flares. The first with a rim on 30% of the rays is kept, else the best.
+      // flares. The first with a rim on 30% of the rays is kept, else the best. Rays cast
+      // from a centre far off cross the rim obliquely and meet other edges first, so the
+      // refinement is repeated from its own result while the rim support grows.
       Circle best = rough;
       double best_rim = -1.0;
-      for (const std::size_t k : {std::size_t{2}, std::size_t{3}, std::size_t{1}, std::size_t{0}}) {
-        if (k >= comps.size()) continue;
-        int inside = 0;
-        const std::vector<Eigen::Vector2d> e =
-            ray_edges(comps[k].smooth, rough.centre_px, rough.radius_px, &inside);
-        if (inside < 90) continue;
-        double rim = 0.0;
-        const Circle c = consensus_circle(e, rough, &rim);
-        if (rim > best_rim) {
-          best_rim = rim;
-          best = c;
+      Circle from = rough;
+      for (int round = 0; round < 4; ++round) {
+        Circle round_best = from;
+        double round_rim = -1.0;
+        for (const std::size_t k :
+             {std::size_t{2}, std::size_t{3}, std::size_t{1}, std::size_t{0}}) {
+          if (k >= comps.size()) continue;
+          int inside = 0;
+          const std::vector<Eigen::Vector2d> e =
+              ray_edges(comps[k].smooth, from.centre_px, from.radius_px, &inside);
+          if (inside < 90) continue;
+          double rim = 0.0;
+          const Circle c = consensus_circle(e, from, &rim);
+          if (rim > round_rim) {
+            round_rim = rim;
+            round_best = c;
+          }
+          if (rim >= 0.3) break;
         }
-        if (rim >= 0.3) break;
+        if (round_rim <= best_rim) break;
+        const double moved = (round_best.centre_px - from.centre_px).norm() +
+                             std::abs(round_best.radius_px - from.radius_px);
+        best = round_best;
+        best_rim = round_rim;
+        if (moved < 0.5) break;
+        from = round_best;
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
-      const bool dup = std::any_of(all.begin(), all.end(), [&](const SphereCandidate& o) {
+      // Of two proposals that refine to about the same circle, the better supported stays.
+      const auto dup = std::find_if(all.begin(), all.end(), [&](const SphereCandidate& o) {
         return same_circle(o.circle, best);
       });
-      if (dup) continue;
+      if (dup != all.end()) {
+        const auto j = static_cast<std::size_t>(dup - all.begin());
+        if (best_rim > refined_rim[j]) {
+          *dup = score_candidate(ev, comps, best, min_peak);
+          refined_rim[j] = best_rim;
+        }
+        continue;
+      }
       all.push_back(score_candidate(ev, comps, best, min_peak));
+      refined_rim.push_back(best_rim);
       region_of.push_back(static_cast<int>(g));
     }
   }
   std::vector<std::size_t> order(all.size());
   for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t a, std::size_t b) { return all[a].score > all[b].score; });
+  // The score saturates (a full track and a third of the rim score 1): among equals, the
+  // better rim first.
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    if (all[a].score != all[b].score) return all[a].score > all[b].score;
+    return all[a].rim > all[b].rim;
+  });
   std::vector<SphereCandidate> sorted;
   std::vector<int> sorted_region;
   for (std::size_t k : order) {
