@@ -392,27 +392,55 @@ TEST(CalibSphereStack, CommandRefusesWeakEvidenceAndDrawsTheCandidates) {
   }
 }
 
-// A photographic preset (synth/photo.h) rendered at 8 of its lights, calibrated without
-// hints (sphere count and focal length given), both circles checked against the truth.
+// A photographic preset (synth/photo.h) rendered in memory, at `lights` (a light set) when
+// given, else at the preset's own.
+struct PhotoImages {
+  synth::PhotoOptions options;
+  synth::PhotoTruth truth;
+  std::vector<Image> images;
+  std::vector<fs::path> names;
+};
+constexpr const char* kEightLights = "rings:15:3,40:3,65:2";
+PhotoImages render_photo(const std::string& preset, const std::string& lights,
+                         std::uint64_t seed = 1) {
+  PhotoImages p;
+  p.options = synth::photo_preset_options(preset);
+  if (!lights.empty()) p.options.lights = lights;
+  p.options.seed = seed;
+  const synth::PhotoRenderer renderer(p.options);
+  p.truth = renderer.truth();
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    p.images.push_back(renderer.render(static_cast<int>(i)));
+    p.names.emplace_back(preset + std::to_string(i) + ".jpg");
+  }
+  return p;
+}
+// Every channel clipped (1) within `radius` pixels of `centre`.
+void paint_clipped_disc(Image* img, const Eigen::Vector2d& centre, double radius) {
+  for (int y = 0; y < img->height(); ++y) {
+    for (int x = 0; x < img->width(); ++x) {
+      if ((Eigen::Vector2d(x, y) - centre).norm() > radius) continue;
+      for (int c = 0; c < img->channels(); ++c) img->at(x, y, c) = 1.0f;
+    }
+  }
+}
+// Calibrated without hints but the sphere count and the focal length.
+StackCalibration calibrate_photo(const PhotoImages& p, int spheres) {
+  StackCalibrationOptions o;
+  o.rig.sphere_count = spheres;
+  o.rig.detection.camera.focal_px = p.options.focal_px;
+  return calibrate_sphere_stack(p.images, p.names, o);
+}
+
+// A photographic preset rendered at 8 of its lights, calibrated without hints, both circles
+// checked against the truth.
 struct PhotoRun {
   synth::PhotoTruth truth;
   StackCalibration result;
 };
 PhotoRun calibrate_photo_preset(const std::string& preset) {
-  synth::PhotoOptions po = synth::photo_preset_options(preset);
-  po.lights = "rings:15:3,40:3,65:2";
-  const synth::PhotoRenderer renderer(po);
-  PhotoRun run{renderer.truth(), {}};
-  std::vector<Image> images;
-  std::vector<fs::path> names;
-  for (std::size_t i = 0; i < run.truth.light_dirs.size(); ++i) {
-    images.push_back(renderer.render(static_cast<int>(i)));
-    names.emplace_back(preset + std::to_string(i) + ".jpg");
-  }
-  StackCalibrationOptions o;
-  o.rig.sphere_count = 2;
-  o.rig.detection.camera.focal_px = po.focal_px;
-  run.result = calibrate_sphere_stack(images, names, o);
+  const PhotoImages p = render_photo(preset, kEightLights);
+  PhotoRun run{p.truth, calibrate_photo(p, 2)};
   EXPECT_EQ(run.result.rig.spheres.size(), 2u);
   for (std::size_t k = 0; k < std::min<std::size_t>(2, run.result.rig.spheres.size()); ++k) {
     const Circle& c = run.result.rig.spheres[k].sphere;
@@ -458,16 +486,8 @@ TEST(CalibSphereStack, PhotoDomeRenderWithEveryArtefact) {
 // is painted on the first sphere, away from its reflection, in one image; the reflection is
 // still taken, and the report says that the second spot was.
 TEST(CalibSphereStack, ASecondSpotThatAgreesWithTheOtherSphereIsTaken) {
-  synth::PhotoOptions po = synth::photo_preset_options("photo-dome");
-  po.lights = "rings:15:3,40:3,65:2";
-  const synth::PhotoRenderer renderer(po);
-  const synth::PhotoTruth truth = renderer.truth();
-  std::vector<Image> images;
-  std::vector<fs::path> names;
-  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
-    images.push_back(renderer.render(static_cast<int>(i)));
-    names.emplace_back("glass" + std::to_string(i) + ".jpg");
-  }
+  PhotoImages p = render_photo("photo-dome", kEightLights);
+  const synth::PhotoTruth& truth = p.truth;
   const int target = 4;
   const synth::PhotoSphereTruth& s0 = truth.spheres[0];
   ASSERT_TRUE(s0.highlight_px[target].has_value());
@@ -475,17 +495,8 @@ TEST(CalibSphereStack, ASecondSpotThatAgreesWithTheOtherSphereIsTaken) {
   // reflection's clipped core is 4-6 pixels in all).
   const Eigen::Vector2d away = (s0.outline.centre_px - *s0.highlight_px[target]).normalized();
   const Eigen::Vector2d spot = s0.outline.centre_px + 0.5 * s0.outline.radius_px * away;
-  Image& img = images[target];
-  for (int y = 0; y < img.height(); ++y) {
-    for (int x = 0; x < img.width(); ++x) {
-      if ((Eigen::Vector2d(x, y) - spot).norm() > 5.0) continue;
-      for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = 1.0f;
-    }
-  }
-  StackCalibrationOptions o;
-  o.rig.sphere_count = 2;
-  o.rig.detection.camera.focal_px = po.focal_px;
-  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  paint_clipped_disc(&p.images[target], spot, 5.0);
+  const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
   const SphereLight& l = r.rig.spheres[0].lights[target];
   EXPECT_EQ(l.spot_rank, 1);
@@ -532,19 +543,9 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
 // cast from a centre that far off cross the rim obliquely; the refinement is repeated from
 // its own result until the rim stops gaining support.
 TEST(CalibSphereStack, PhotoLargeSphereInADarkRoomIsFound) {
-  synth::PhotoOptions po = synth::photo_preset_options("photo-large-sphere");
-  po.seed = 2;
-  const synth::PhotoRenderer renderer(po);
-  const synth::PhotoTruth truth = renderer.truth();
-  std::vector<Image> images;
-  std::vector<fs::path> names;
-  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
-    images.push_back(renderer.render(static_cast<int>(i)));
-    names.emplace_back("large" + std::to_string(i) + ".jpg");
-  }
-  StackCalibrationOptions o;
-  o.rig.detection.camera.focal_px = po.focal_px;
-  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  const PhotoImages p = render_photo("photo-large-sphere", "", 2);
+  const synth::PhotoTruth& truth = p.truth;
+  const StackCalibration r = calibrate_photo(p, 1);
   ASSERT_EQ(r.rig.spheres.size(), 1u);
   const Circle& c = r.rig.spheres[0].sphere;
   const synth::SphereOutline& t = truth.spheres[0].outline;
@@ -560,16 +561,8 @@ TEST(CalibSphereStack, PhotoLargeSphereInADarkRoomIsFound) {
 // mostly the reflection. The light's core is still the part that is not clipped in the
 // stack's median, and its centre is found from its own edge.
 TEST(CalibSphereStack, ACoreMergedWithAStaticClippedReflectionIsCutFromIt) {
-  synth::PhotoOptions po = synth::photo_preset_options("photo-chrome");
-  po.lights = "rings:15:3,40:3,65:2";
-  const synth::PhotoRenderer renderer(po);
-  const synth::PhotoTruth truth = renderer.truth();
-  std::vector<Image> images;
-  std::vector<fs::path> names;
-  for (std::size_t i = 0; i < truth.light_dirs.size(); ++i) {
-    images.push_back(renderer.render(static_cast<int>(i)));
-    names.emplace_back("chrome" + std::to_string(i) + ".jpg");
-  }
+  PhotoImages p = render_photo("photo-chrome", kEightLights);
+  const synth::PhotoTruth& truth = p.truth;
   const int target = 4;
   const synth::PhotoSphereTruth& s0 = truth.spheres[0];
   ASSERT_TRUE(s0.highlight_px[target].has_value());
@@ -577,18 +570,8 @@ TEST(CalibSphereStack, ACoreMergedWithAStaticClippedReflectionIsCutFromIt) {
   // the core by about a pixel on the side toward the sphere's centre, in every image.
   const Eigen::Vector2d toward = (s0.outline.centre_px - *s0.highlight_px[target]).normalized();
   const Eigen::Vector2d blob = *s0.highlight_px[target] + 9.0 * toward;
-  for (Image& img : images) {
-    for (int y = 0; y < img.height(); ++y) {
-      for (int x = 0; x < img.width(); ++x) {
-        if ((Eigen::Vector2d(x, y) - blob).norm() > 6.0) continue;
-        for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = 1.0f;
-      }
-    }
-  }
-  StackCalibrationOptions o;
-  o.rig.sphere_count = 2;
-  o.rig.detection.camera.focal_px = po.focal_px;
-  const StackCalibration r = calibrate_sphere_stack(images, names, o);
+  for (Image& img : p.images) paint_clipped_disc(&img, blob, 6.0);
+  const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
   const SphereLight& l = r.rig.spheres[0].lights[target];
   ASSERT_TRUE(l.found) << l.flag;
