@@ -434,6 +434,8 @@ struct Want {
   int image = 0;
   int sphere = 0;
   cv::Rect rect;  // photo pixels
+  // The other of two comparable spots, tried only when the one taken proves unusable.
+  int alternate_rank = -1;
 };
 
 StackCalibration run(const Source& src, const std::vector<fs::path>& names,
@@ -616,11 +618,19 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         ++out.two_spot_images;
       }
       const int margin = static_cast<int>(std::ceil(std::max(6.0, 2.0 * s)));
-      cv::Rect box(static_cast<int>(sp.box.x * s) - margin, static_cast<int>(sp.box.y * s) - margin,
-                   static_cast<int>(sp.box.width * s) + 2 * margin,
-                   static_cast<int>(sp.box.height * s) + 2 * margin);
-      box &= cv::Rect(0, 0, ev.w, ev.h);
-      wants.push_back({i, static_cast<int>(k), box});
+      auto window_of = [&](const Spot& spot) {
+        cv::Rect box(static_cast<int>(spot.box.x * s) - margin,
+                     static_cast<int>(spot.box.y * s) - margin,
+                     static_cast<int>(spot.box.width * s) + 2 * margin,
+                     static_cast<int>(spot.box.height * s) + 2 * margin);
+        return box & cv::Rect(0, 0, ev.w, ev.h);
+      };
+      wants.push_back({i, static_cast<int>(k), window_of(sp), -1});
+      if (spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift) {
+        const int other = r == 0 ? 1 : 0;
+        wants.push_back(
+            {i, static_cast<int>(k), window_of(spots[static_cast<std::size_t>(other)]), other});
+      }
     }
   }
   // Windows: straight from the analysis copy at scale 1, else a second streamed pass.
@@ -682,7 +692,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   for (std::size_t k = 0; k < k_spheres; ++k) {
     std::vector<int> sizes;
     for (std::size_t q = 0; q < wants.size(); ++q) {
-      if (static_cast<std::size_t>(wants[q].sphere) == k && located[q].ok && located[q].saturated) {
+      if (static_cast<std::size_t>(wants[q].sphere) == k && wants[q].alternate_rank < 0 &&
+          located[q].ok && located[q].saturated) {
         sizes.push_back(located[q].pixels);
       }
     }
@@ -700,11 +711,12 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       located[q] = locate(windows[q], bases[q], inside_of(q), std::sqrt(median / std::numbers::pi));
     }
   }
-  for (std::size_t q = 0; q < wants.size(); ++q) {
+  // The light from a located spot: unusable (flagged) when there is no highlight, the core is
+  // not compact or the reflected direction points below the sample plane.
+  auto evaluate = [&](std::size_t q, SphereLight* out_light) {
     const Want& wt = wants[q];
     const Circle& c = circles[static_cast<std::size_t>(wt.sphere)];
-    SphereLight& light =
-        reports[static_cast<std::size_t>(wt.sphere)].lights[static_cast<std::size_t>(wt.image)];
+    SphereLight& light = *out_light;
     const Located& loc = located[q];
     light.peak = loc.peak;
     light.saturated = loc.saturated;
@@ -715,17 +727,38 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     if (!loc.ok || loc.peak < det.min_peak) {
       light.flag =
           "no highlight on the sphere (peak " + std::to_string(loc.peak).substr(0, 5) + ")";
-      continue;
+      return;
     }
     light.highlight_px = loc.px;
     if (loc.pixels > sphere_area_factor * c.radius_px * c.radius_px) {
       light.flag = "highlight core covers " + std::to_string(loc.pixels) +
                    " pixels: not a compact highlight (a reflection of the scene?)";
-      continue;
+      return;
     }
     light.direction = reflect_highlight(c, det.camera, light.highlight_px, ev.w, ev.h);
     light.found = light.direction.z() > 0.0;
     if (!light.found) light.flag = "reflected direction is below the sample plane";
+  };
+  for (std::size_t q = 0; q < wants.size(); ++q) {
+    if (wants[q].alternate_rank >= 0) continue;
+    evaluate(q, &reports[static_cast<std::size_t>(wants[q].sphere)]
+                     .lights[static_cast<std::size_t>(wants[q].image)]);
+  }
+  // Two comparable spots and the one taken unusable (a glass ball's refracted hot spot is
+  // larger than a compact highlight, or reflects to below the plane): the other is taken when
+  // it is usable. It stays doubtful (second_peak), and spot_rank says which was taken.
+  for (std::size_t q = 0; q < wants.size(); ++q) {
+    if (wants[q].alternate_rank < 0) continue;
+    SphereLight& light = reports[static_cast<std::size_t>(wants[q].sphere)]
+                             .lights[static_cast<std::size_t>(wants[q].image)];
+    if (light.found) continue;
+    SphereLight other = light;
+    other.flag.clear();
+    evaluate(q, &other);
+    if (!other.found) continue;
+    other.second_peak = light.peak;
+    other.spot_rank = wants[q].alternate_rank;
+    light = other;
   }
   out.rig = refine_rig(std::move(reports), names, ev.w, ev.h, rig);
   return out;

@@ -94,8 +94,9 @@ struct SphereLight {
   double second_peak = 0.0;
   // Which moving spot was taken (calibrate_sphere_stack): 0, the brightest (a saturated one:
   // the larger); 1, the second, because its direction agrees with the other spheres' and the
-  // brightest's does not (a glass ball's refracted hot spot). second_peak is then the
-  // brightest's peak.
+  // brightest's does not, or because the brightest is unusable (not compact, or reflecting
+  // to below the sample plane) and the second is not (a glass ball's refracted hot spot).
+  // second_peak is then the brightest's peak.
   int spot_rank = 0;
   // Filled by the rig refinement (sphere_refine.h); 0 / false before it.
   double residual_px = 0.0;  // predicted minus measured highlight, pixels
