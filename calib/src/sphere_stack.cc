@@ -304,9 +304,12 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     }
     if (core_radius_hint > 0.0) {
       // Beside a static clipped reflection, only a boundary pixel with an unclipped
-      // neighbour lit above the median (the light's halo) is the light's edge.
+      // neighbour lit above the median (the light's halo) is the light's edge, and only one
+      // that is dark in the median: where the median is bright the pixel belongs to the
+      // reflection, whose blurred rim the light's glow lifts as well.
       auto light_edge = [&](int x, int y) {
         if (!out.touches_static) return true;
+        if (base.at<float>(y, x) >= 0.5 * top) return false;
         constexpr int kDx[4] = {1, -1, 0, 0}, kDy[4] = {0, 0, 1, -1};
         for (int d = 0; d < 4; ++d) {
           const int nx = x + kDx[d], ny = y + kDy[d];
