@@ -136,6 +136,10 @@ constexpr int kSmallCorePixels = 20;
 // this much (sum of pairwise angles, degrees).
 constexpr double kSpotAgreementMarginDeg = 3.0;
 
+// The full-resolution circle is chosen by the rim points within this distance (see
+// consensus_circle).
+constexpr double kRimChoiceTolPx = 1.0;
+
 // A sphere whose clipped cores have at least this many pixels (median over the images) shows
 // the light as a disc: a core kMergedCoreRatio times as large is cut back to it (cut_to_disc).
 constexpr int kMergedCoreMinPixels = 12;
@@ -495,7 +499,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
           int inside = 0;
           const auto e = ray_edges(f, c.centre_px, c.radius_px, &inside);
           double rim = 0.0;
-          const Circle r = consensus_circle(e, c, &rim);
+          const Circle r = consensus_circle(e, c, &rim, kRimChoiceTolPx);
           if (rim > best_rim &&
               (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
               std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {

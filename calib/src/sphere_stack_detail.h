@@ -137,8 +137,11 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
 // smoothed composite `f`; `inside` counts the rays that stay in the frame.
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
                                        int* inside);
-// The circle the rim points agree on, near `rough`; `rim` gets the share of rays that agree.
-Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& rough, double* rim);
+// The circle the rim points agree on, near `rough`; `rim` gets the share of rays that agree
+// (within max(1 px, 1% r)). With `choose_tol_px` > 0 the circle is chosen by the points within
+// that distance instead.
+Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& rough, double* rim,
+                        double choose_tol_px = 0.0);
 // The sphere candidates of the stack, scored, best first; `chosen_photo` gets the `count`
 // chosen circles in photo pixels.
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
