@@ -67,6 +67,7 @@ struct SphereArgs {
   std::string radius_range;
   std::string reference;
   double min_score = 0.5;
+  std::string sphere_material = "auto";
   bool overlay_full_size = false;
   int overlay_max_side = 1600;
   calib::SphereOptions options;
@@ -142,6 +143,9 @@ void run_sphere(const SphereArgs& args) {
   }
   if (!args.reference.empty()) stack_options.search.reference = args.reference;
   stack_options.search.min_score = args.min_score;
+  stack_options.material = args.sphere_material == "mirror"  ? calib::SphereMaterial::kMirror
+                           : args.sphere_material == "glass" ? calib::SphereMaterial::kGlass
+                                                             : calib::SphereMaterial::kAuto;
   if (!options.spheres.empty() && (!args.rois.empty() || !args.radius_range.empty())) {
     throw Error("--roi and --radius-range help the search: not with --sphere or --mask");
   }
@@ -200,11 +204,10 @@ void run_sphere(const SphereArgs& args) {
     if (s.sphere_detected) std::printf(", score %.2f", score);
     std::printf(")\n");
   }
-  if (result.two_spot_images * 2 > static_cast<int>(files.size())) {
-    std::printf(
-        "  %d images show two moving spots on a sphere (glass?): the brightest was taken; check "
-        "the overlays\n",
-        result.two_spot_images);
+  if (result.two_spot_images > 0) {
+    std::printf("  %d of %zu images show two moving spots on a sphere; treated as %s (%s)\n",
+                result.two_spot_images, files.size(), calib::to_string(result.material),
+                result.material_note.c_str());
   }
   std::printf("calibrate sphere: %s model%s; %d of %zu lights usable, %d outliers%s -> %s%s%s\n",
               report.model.c_str(), report.refined ? ", refined" : "", report.usable(),
@@ -340,6 +343,15 @@ void add_calibrate_command(CLI::App& root) {
                  "candidates)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
+  sp->add_option("--sphere-material", sphere->sphere_material,
+                 "What the spheres are, for two moving spots on one sphere: mirror (chrome, "
+                 "black glossy: one reflection per light; an unusable spot leaves the light "
+                 "without one), glass (a surface reflection and a refracted hot spot: when the "
+                 "spot taken is unusable a comparable usable second one is taken, doubtful), "
+                 "auto (glass when a quarter of the images show a second spot across the "
+                 "sphere's centre from the first; reported)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "mirror", "glass"}));
   sp->add_flag("--overlay-full-size", sphere->overlay_full_size,
                "Overlays at the photographs' size (default: longest side --overlay-max-side)");
   sp->add_option("--overlay-max-side", sphere->overlay_max_side,

@@ -8,6 +8,7 @@
 #include <numbers>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
@@ -629,10 +630,44 @@ TEST(CalibSphereStack, OneGlassMarbleHasEveryLight) {
     mean += a / static_cast<double>(p.truth.light_dirs.size());
     max = std::max(max, a);
   }
-  std::printf("one glass marble: %d lights from the second spot; mean %.3f max %.3f deg\n", second,
-              mean, max);
+  std::printf("one glass marble: %d lights from the second spot; mean %.3f max %.3f deg (%s)\n",
+              second, mean, max, r.material_note.c_str());
   EXPECT_GE(second, 1);
   EXPECT_LE(max, kLightMaxTargetDeg);
+  EXPECT_EQ(r.material, SphereMaterial::kGlass);
+
+  // Told it is a mirror, the same marble's unusable spots leave their lights without one:
+  // another spot is never taken in their place.
+  StackCalibrationOptions mirror;
+  mirror.rig.sphere_count = 1;
+  mirror.rig.detection.camera.focal_px = p.options.focal_px;
+  mirror.material = SphereMaterial::kMirror;
+  const StackCalibration m = calibrate_sphere_stack(p.images, p.names, mirror);
+  EXPECT_EQ(m.material, SphereMaterial::kMirror);
+  int unusable = 0;
+  for (const SphereLight& l : m.rig.spheres[0].lights) {
+    EXPECT_EQ(l.spot_rank, 0);
+    unusable += l.found ? 0 : 1;
+  }
+  EXPECT_EQ(unusable, second);
+}
+
+// The material is decided from where the second spots lie: a glass ball's refracted hot spot
+// is across the centre from its reflection. Glass marbles are found to be glass, and once the
+// two marbles settle which spot is each light's reflection no light is left doubtful; black
+// glossy spheres (no second spots) and chrome ones are mirrors.
+TEST(CalibSphereStack, SphereMaterialDecidedFromTheSecondSpots) {
+  const PhotoImages glass = render_photo("photo-glass", kEightLights);
+  const StackCalibration g = calibrate_photo(glass, 2);
+  std::printf("photo-glass: %s, %s\n", to_string(g.material), g.material_note.c_str());
+  EXPECT_EQ(g.material, SphereMaterial::kGlass);
+  EXPECT_GE(g.two_spot_images, 2);
+  EXPECT_EQ(g.rig.usable(), static_cast<int>(glass.truth.light_dirs.size()));
+  EXPECT_EQ(g.rig.outliers(), 0);
+  const PhotoImages chrome = render_photo("photo-chrome", kEightLights);
+  const StackCalibration c = calibrate_photo(chrome, 2);
+  std::printf("photo-chrome: %s, %s\n", to_string(c.material), c.material_note.c_str());
+  EXPECT_EQ(c.material, SphereMaterial::kMirror);
 }
 
 // A static reflection clipped in every image (a window or a lamp mirrored in the chrome),
@@ -792,6 +827,25 @@ TEST(CalibSphereStack, CommandCalibratesTheRealChromeSphereWithoutHints) {
   ASSERT_EQ(overlays.size(), 12u);
   const ImageInfo info = probe_image(dir / "ov" / overlays.front());
   EXPECT_LE(std::max(info.width, info.height), 256);
+  std::ifstream report_file(dir / "chrome.json");
+  const auto report = nlohmann::json::parse(report_file);
+  EXPECT_EQ(report.at("material"), "mirror");
+
+  // The material given is reported as given; an unknown one is refused before any output.
+  std::vector<std::string> given(args.begin(), args.begin() + 14);
+  given.insert(given.end(), {"-o", (dir / "given.lp").string(), "--report",
+                             (dir / "given.json").string(), "--sphere-material", "mirror"});
+  ASSERT_EQ(test::run_ptmkit(given).exit_code, 0);
+  std::ifstream given_file(dir / "given.json");
+  const auto given_report = nlohmann::json::parse(given_file);
+  EXPECT_EQ(given_report.at("material"), "mirror");
+  EXPECT_NE(given_report.at("material_note").get<std::string>().find("given"), std::string::npos);
+  std::vector<std::string> bad(args.begin(), args.begin() + 14);
+  bad.insert(bad.end(), {"-o", (dir / "bad.lp").string(), "--sphere-material", "crystal"});
+  const auto b = test::run_ptmkit(bad);
+  EXPECT_NE(b.exit_code, 0);
+  EXPECT_NE(b.err.find("--sphere-material"), std::string::npos) << b.err;
+  EXPECT_FALSE(fs::exists(dir / "bad.lp"));
 }
 
 }  // namespace

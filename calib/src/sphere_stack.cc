@@ -576,6 +576,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   // focuses, seen through it) can be larger than its reflection and does not obey mirror
   // geometry; the reflections on every sphere agree on one distant light.
   std::vector<std::vector<int>> rank(k_spheres, std::vector<int>(static_cast<std::size_t>(ev.n)));
+  // Per image: the choice agrees across spheres better than every other by the margin.
+  std::vector<char> settled(static_cast<std::size_t>(ev.n), 0);
   if (k_spheres >= 2 && k_spheres <= 4) {
     for (int i = 0; i < ev.n; ++i) {
       const auto ii = static_cast<std::size_t>(i);
@@ -617,6 +619,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       const double brightest = cost(pick);
       double best_cost = brightest;
       const int combos = 1 << k_spheres;
+      std::vector<std::pair<int, double>> costs;  // valid combinations (bit k: sphere k's rank)
+      costs.emplace_back(0, brightest);
       for (int m = 1; m < combos; ++m) {
         bool valid = true;
         for (std::size_t k = 0; k < k_spheres; ++k) {
@@ -625,6 +629,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         }
         if (!valid) continue;
         const double c = cost(pick);
+        costs.emplace_back(m, c);
         if (c < best_cost) {
           best_cost = c;
           best = pick;
@@ -632,10 +637,57 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       }
       // The spots' coarse positions (analysis pixels) give directions to a degree or two; a
       // refracted spot is tens of degrees off.
+      int chosen = 0;
+      double chosen_cost = brightest;
       if (best_cost < brightest - kSpotAgreementMarginDeg) {
         for (std::size_t k = 0; k < k_spheres; ++k) rank[k][ii] = best[k];
+        chosen = 0;
+        for (std::size_t k = 0; k < k_spheres; ++k) chosen |= best[k] << k;
+        chosen_cost = best_cost;
       }
+      int seen = 0;
+      for (std::size_t k = 0; k < k_spheres; ++k) seen += choices[k] > 0 ? 1 : 0;
+      bool clear = seen >= 2;
+      for (const auto& [m, c] : costs) {
+        if (m != chosen && c < chosen_cost + kSpotAgreementMarginDeg) clear = false;
+      }
+      settled[ii] = clear ? 1 : 0;
     }
+  }
+  // Two comparable spots: images where any sphere shows them decide the material (kAuto).
+  auto two_spots = [&](std::size_t k, std::size_t ii) {
+    const std::vector<Spot>& spots = spots_of[k][ii];
+    return spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift;
+  };
+  // A glass ball's refracted hot spot lies across the centre from its surface reflection (the
+  // ball focuses the light on its far side); a second spot beside the first (a flare's spoke,
+  // a reflection of the lit scene) says nothing of glass.
+  int across = 0;
+  for (int i = 0; i < ev.n; ++i) {
+    bool two = false, opposite = false;
+    for (std::size_t k = 0; k < k_spheres; ++k) {
+      const auto ii = static_cast<std::size_t>(i);
+      if (!two_spots(k, ii)) continue;
+      two = true;
+      const Eigen::Vector2d c =
+          (circles[k].centre_px - Eigen::Vector2d::Constant(0.5 * (s - 1))) / s;
+      const Eigen::Vector2d a = spots_of[k][ii][0].centre_small - c;
+      const Eigen::Vector2d b = spots_of[k][ii][1].centre_small - c;
+      if (a.dot(b) < 0.0) opposite = true;
+    }
+    out.two_spot_images += two ? 1 : 0;
+    across += opposite ? 1 : 0;
+  }
+  if (options.material == SphereMaterial::kAuto) {
+    const bool glass = across >= kGlassTwoSpotShare * ev.n && across > 0;
+    out.material = glass ? SphereMaterial::kGlass : SphereMaterial::kMirror;
+    out.material_note = "decided from the stack: " + std::to_string(across) + " of " +
+                        std::to_string(ev.n) +
+                        " images show a second comparable spot across the sphere's centre (" +
+                        (glass ? "at least" : "fewer than") + " a quarter)";
+  } else {
+    out.material = options.material;
+    out.material_note = "given (--sphere-material)";
   }
   for (std::size_t k = 0; k < k_spheres; ++k) {
     for (int i = 0; i < ev.n; ++i) {
@@ -649,9 +701,10 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       const int r = rank[k][ii];
       const Spot& sp = spots[static_cast<std::size_t>(r)];
       light.spot_rank = r;
-      if (spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift) {
+      // On glass a second spot is expected: once the spheres settle which spot is the
+      // reflection, it leaves no doubt.
+      if (two_spots(k, ii) && !(out.material == SphereMaterial::kGlass && settled[ii])) {
         light.second_peak = spots[r == 0 ? 1 : 0].peak;
-        ++out.two_spot_images;
       }
       const int margin = static_cast<int>(std::ceil(std::max(6.0, 2.0 * s)));
       auto window_of = [&](const Spot& spot) {
@@ -662,7 +715,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         return box & cv::Rect(0, 0, ev.w, ev.h);
       };
       wants.push_back({i, static_cast<int>(k), window_of(sp), -1});
-      if (spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift) {
+      if (out.material == SphereMaterial::kGlass && two_spots(k, ii)) {
         const int other = r == 0 ? 1 : 0;
         wants.push_back(
             {i, static_cast<int>(k), window_of(spots[static_cast<std::size_t>(other)]), other});
@@ -855,10 +908,24 @@ StackCalibration calibrate_sphere_stack(const std::vector<Image>& images,
   return run(src, names, options);
 }
 
+const char* to_string(SphereMaterial m) {
+  switch (m) {
+    case SphereMaterial::kAuto:
+      return "auto";
+    case SphereMaterial::kMirror:
+      return "mirror";
+    case SphereMaterial::kGlass:
+      return "glass";
+  }
+  return "auto";
+}
+
 std::string StackCalibration::to_json() const {
   nlohmann::json j = nlohmann::json::parse(rig.to_json());
   j["analysis_scale"] = analysis_scale;
   j["two_spot_images"] = two_spot_images;
+  j["material"] = to_string(material);
+  j["material_note"] = material_note;
   j["candidates"] = nlohmann::json::array();
   for (const SphereCandidate& c : candidates) {
     j["candidates"].push_back({{"centre_px", {c.circle.centre_px.x(), c.circle.centre_px.y()}},

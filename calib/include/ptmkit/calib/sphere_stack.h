@@ -42,7 +42,8 @@
 // spots in the circle (a glass ball's surface reflection and its refracted hot spot) are reported
 // (StackCalibration::two_spot_images); with two or more spheres the spot whose direction agrees
 // with the other spheres' is taken (a refracted spot does not obey mirror geometry;
-// SphereLight::spot_rank says which), with one sphere the brightest.
+// SphereLight::spot_rank says which), with one sphere the brightest unless it proves unusable
+// on a glass sphere (SphereMaterial).
 #pragma once
 
 #include <filesystem>
@@ -76,10 +77,30 @@ struct SphereSearchOptions {
   int analysis_max_side_px = 1280;
 };
 
+// What the spheres are, for choosing between two moving spots on one sphere.
+enum class SphereMaterial {
+  // Glass where at least a quarter of the images (kGlassTwoSpotShare) show a second spot of at
+  // least half the first's lift across the sphere's centre from it (where a glass ball's
+  // refracted hot spot lies), mirror otherwise; the decision is reported.
+  kAuto,
+  // Chrome, black glossy: one reflection of each light. When the spot taken proves unusable
+  // the light has none; another spot is never taken in its place on a single sphere.
+  kMirror,
+  // A surface reflection and a refracted hot spot: when the spot taken proves unusable (not
+  // compact, or reflecting to below the plane) and a comparable second spot is usable, the
+  // second is taken (still doubtful).
+  kGlass,
+};
+[[nodiscard]] const char* to_string(SphereMaterial m);
+
+// The share of images with two spots across the centre from which kAuto decides glass.
+inline constexpr double kGlassTwoSpotShare = 0.25;
+
 struct StackCalibrationOptions {
   // The rig (spheres given or their count, camera, refinement, highlight thresholds).
   RigOptions rig;
   SphereSearchOptions search;
+  SphereMaterial material = SphereMaterial::kAuto;
 };
 
 struct SphereCandidate {
@@ -99,6 +120,9 @@ struct StackCalibration {
   RigReport rig;
   std::vector<SphereCandidate> candidates;  // best first; empty when the circles were given
   int two_spot_images = 0;  // images with a second moving spot of half the first's peak
+  // The material the second spots were treated as (kMirror or kGlass), and why.
+  SphereMaterial material = SphereMaterial::kMirror;
+  std::string material_note;
   int analysis_scale = 1;
   int width = 0, height = 0;
   [[nodiscard]] std::string to_json() const;
