@@ -30,6 +30,8 @@ class Source {
   [[nodiscard]] virtual int width() const = 0;
   [[nodiscard]] virtual int height() const = 0;
   [[nodiscard]] virtual int count() const = 0;
+  // How the samples are encoded (sRGB or linear).
+  [[nodiscard]] virtual ColourSpace colour_space() const = 0;
   // Calls fn with every band, top to bottom.
   virtual void scan(const std::function<void(const StackBand&)>& fn) const = 0;
 };
@@ -40,10 +42,12 @@ class FileSource : public Source {
     StackReader probe(files_);
     w_ = probe.width();
     h_ = probe.height();
+    colour_space_ = probe.summary().colour_space;
   }
   int width() const override { return w_; }
   int height() const override { return h_; }
   int count() const override { return static_cast<int>(files_.size()); }
+  ColourSpace colour_space() const override { return colour_space_; }
   void scan(const std::function<void(const StackBand&)>& fn) const override {
     StackReader reader(files_);
     StackBand band;
@@ -53,6 +57,7 @@ class FileSource : public Source {
  private:
   std::vector<fs::path> files_;
   int w_ = 0, h_ = 0;
+  ColourSpace colour_space_ = ColourSpace::kSRGB;
 };
 
 class MemorySource : public Source {
@@ -61,6 +66,7 @@ class MemorySource : public Source {
   int width() const override { return images_[0].width(); }
   int height() const override { return images_[0].height(); }
   int count() const override { return static_cast<int>(images_.size()); }
+  ColourSpace colour_space() const override { return images_[0].colour_space(); }
   void scan(const std::function<void(const StackBand&)>& fn) const override {
     StackBand band;
     const int w = width(), h = height(), c = images_[0].channels();

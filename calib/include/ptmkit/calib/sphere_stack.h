@@ -33,17 +33,19 @@
 // stack's median, so a reflected window or lamp, which is in every image, cancels), the
 // brightest taken, then located in the photograph at full resolution:
 //   unsaturated  centroid of the brightness above the median within the spot
-//   saturated    the clipped core without its flare streaks and bloom: the pixels at least
-//                half the core's inscribed radius from the clipped region's edge, grown back
-//                by that radius inside it (a morphological opening), their centroid
-// A small core (at most 20 pixels) is then moved to the centre about which its halo is most
-// nearly point-symmetric; a core far larger than its sphere's median core (a mirror's disc
-// merged with the clipped scene beside it) is cut back to a disc of the median's size. Two moving
-// spots in the circle (a glass ball's surface reflection and its refracted hot spot) are reported
-// (StackCalibration::two_spot_images); with two or more spheres the spot whose direction agrees
-// with the other spheres' is taken (a refracted spot does not obey mirror geometry;
-// SphereLight::spot_rank says which), with one sphere the brightest unless it proves unusable
-// on a glass sphere (SphereMaterial).
+//   saturated    the clipped core (its holes filled) without its flare streaks and bloom: the
+//                pixels at least half the core's inscribed radius from the clipped region's
+//                edge, grown back by that radius inside it (a morphological opening), their
+//                centroid
+// Brightness above the median is measured in linear light (sRGB samples linearised). A small
+// core (at most 20 pixels) is then moved to the centre about which its halo, clipped pixels
+// left out, is most nearly point-symmetric; a core far larger than its sphere's median core (a
+// mirror's disc merged with the clipped scene beside it) is cut back to a disc of the median's
+// size. Two moving spots in the circle (a glass ball's surface reflection and its refracted hot
+// spot) are reported (StackCalibration::two_spot_images); with two or more spheres the spot whose
+// direction agrees with the other spheres' is taken (a refracted spot does not obey mirror
+// geometry; SphereLight::spot_rank says which), with one sphere the brightest unless it proves
+// unusable on a glass sphere (SphereMaterial).
 #pragma once
 
 #include <filesystem>
