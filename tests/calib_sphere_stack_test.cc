@@ -56,6 +56,9 @@ constexpr double kOnAWindowsEdgeHighlightPx = 0.6;
 // A small core whose halo spans a mirrored window: measured 0.04 and 0.05 px; 0.37 and 0.39 px
 // with the halo's symmetry measured on the sRGB-encoded lift, clipped pixels included.
 constexpr double kHaloOverAWindowPx = 0.15;
+// A chrome core over a background much brighter on one side: measured 0.18 and 0.13 px; 0.78
+// and 0.61 px by the core's edge alone.
+constexpr double kUnevenBackgroundPx = 0.3;
 // A candidate scoring below the default --min-score (0.5) is never taken (docs/CALIBRATION.md).
 constexpr double kMinScore = 0.5;
 // uw-psm's circle found without a hint against the mask's: measured 0.97 px apart (its lower
@@ -702,12 +705,12 @@ TEST(CalibSphereStack, ACoreMergedWithAStaticClippedReflectionIsCutFromIt) {
   EXPECT_LT(off, kMergedWithStaticHighlightPx);
 }
 
-// Seed 2 of a photographic preset at 10 lights, calibrated without hints: the light at
-// elevation 15 degrees facing the spheres' tops (the preset's own light 3) is mirrored beside
-// a window on both spheres. Each sphere's highlight of it is checked against the truth.
-void check_light_beside_a_window(const std::string& preset, const char* label, double bound_px) {
-  const PhotoImages p = render_photo(preset, "rings:15:4,40:4,65:2", 2);
-  const int target = 1;  // elevation 15, azimuth 90 degrees
+// A photographic preset at 10 lights (elevation 15 degrees at azimuths 0, 90, 180, 270; 40 at
+// the same; 65 at 0 and 180), calibrated without hints; each sphere's highlight of light
+// `target` is checked against the truth.
+void check_light(const std::string& preset, std::uint64_t seed, int target, const char* label,
+                 double bound_px) {
+  const PhotoImages p = render_photo(preset, "rings:15:4,40:4,65:2", seed);
   const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
   for (std::size_t k = 0; k < 2; ++k) {
@@ -725,8 +728,10 @@ void check_light_beside_a_window(const std::string& preset, const char* label, d
 // not; one light's image lies on that rim, its clipped core merged with the window's. The
 // light's edge is taken only where the median is dark: the window's rim, lifted by the
 // light's glow, would pull the disc into the window.
+// (Seed 2: the light at elevation 15 degrees facing the spheres' tops, the preset's own
+// light 3, is mirrored beside a window on both spheres.)
 TEST(CalibSphereStack, ACoreOnAWindowsBlurredRimIsCutFromTheWindow) {
-  check_light_beside_a_window("photo-chrome", "core on a window's rim", kOnAWindowsEdgeHighlightPx);
+  check_light("photo-chrome", 2, 1, "core on a window's rim", kOnAWindowsEdgeHighlightPx);
 }
 
 // A black glossy sphere's small clipped core beside a window mirrored in the sphere: the halo
@@ -734,7 +739,14 @@ TEST(CalibSphereStack, ACoreOnAWindowsBlurredRimIsCutFromTheWindow) {
 // the lift in linear light and without clipped pixels; on the sRGB-encoded lift the halo over
 // the window looks weaker and the centre moves away from it.
 TEST(CalibSphereStack, AHaloOverAMirroredWindowIsMeasuredInLinearLight) {
-  check_light_beside_a_window("photo-dome", "halo over a mirrored window", kHaloOverAWindowPx);
+  check_light("photo-dome", 2, 1, "halo over a mirrored window", kHaloOverAWindowPx);
+}
+
+// A chrome sphere's clipped core where the background is much brighter on one side (seed 1,
+// the light at elevation 15 degrees facing the spheres' bottoms): the clip is reached further
+// out on that side, and the core's edge moves; its halo's symmetry does not.
+TEST(CalibSphereStack, ACoreOverAnUnevenBackgroundIsCentredByItsHalo) {
+  check_light("photo-chrome", 1, 3, "core over an uneven background", kUnevenBackgroundPx);
 }
 
 std::vector<Eigen::Vector3d> published_lights(const fs::path& root) {

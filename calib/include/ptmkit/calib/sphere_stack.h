@@ -39,13 +39,15 @@
 //                centroid
 // Brightness above the median is measured in linear light (sRGB samples linearised). A small
 // core (at most 20 pixels) is then moved to the centre about which its halo, clipped pixels
-// left out, is most nearly point-symmetric; a core far larger than its sphere's median core (a
-// mirror's disc merged with the clipped scene beside it) is cut back to a disc of the median's
-// size. Two moving spots in the circle (a glass ball's surface reflection and its refracted hot
-// spot) are reported (StackCalibration::two_spot_images); with two or more spheres the spot whose
-// direction agrees with the other spheres' is taken (a refracted spot does not obey mirror
-// geometry; SphereLight::spot_rank says which), with one sphere the brightest unless it proves
-// unusable on a glass sphere (SphereMaterial).
+// left out, is most nearly point-symmetric (a larger clipped core too, where that centre lies
+// more than 0.3 px from its edge's: a background brighter on one side moves the edge); a core
+// far larger than its sphere's median core (a mirror's disc merged with the clipped scene beside
+// it) is cut back to a disc of the median's size. Two moving spots in the circle (a glass ball's
+// surface reflection and its refracted hot spot) are reported
+// (StackCalibration::two_spot_images); with two or more spheres the spot whose direction agrees
+// with the other spheres' is taken (a refracted spot does not obey mirror geometry;
+// SphereLight::spot_rank says which), with one sphere the brightest unless it proves unusable on
+// a glass sphere (SphereMaterial).
 #pragma once
 
 #include <filesystem>
