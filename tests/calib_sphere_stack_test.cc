@@ -41,16 +41,17 @@ constexpr double kPhotoDomeEightLightsMeanDeg = 0.25;
 // the clipped scene beside it is taken whole.
 constexpr double kPhotoChromeWorstHighlightPx = 1.5;
 
-// A light's core merged with a static clipped reflection: measured 0.40 px (0.94 px for the
-// same light without the reflection); refused as "not a compact highlight" when the merged
-// region is taken whole.
-constexpr double kMergedWithStaticHighlightPx = 0.75;
+// A light's core merged with a static clipped reflection: measured 0.18 px (0.94 px for the
+// same light without the reflection; 0.40 px with the disc's arc on its pixels' centres, 1.32
+// px with the reflection's blurred rim taken for the light's edge); refused as "not a compact
+// highlight" when the merged region is taken whole.
+constexpr double kMergedWithStaticHighlightPx = 0.3;
 // Holes punched next to a clipped core's outermost rows: measured 0.000 px of movement;
 // 0.74 px when the holes are left for the core's opening to widen.
 constexpr double kHolesInACoreMovePx = 0.1;
 // A light mirrored on the edge of a window's reflection (photo-chrome seed 2, the light at
-// elevation 15 degrees facing the spheres' tops): measured 0.41 px on each sphere; 1.6 and
-// 2.8 px when the window's blurred rim, lifted by the light's glow, counts as the light's
+// elevation 15 degrees facing the spheres' tops): measured 0.31 px on each sphere; 1.6 and
+// 2.4 px when the window's blurred rim, lifted by the light's glow, counts as the light's
 // edge.
 constexpr double kOnAWindowsEdgeHighlightPx = 0.6;
 // A small core whose halo spans a mirrored window: measured 0.04 and 0.05 px; 0.37 and 0.39 px
