@@ -305,6 +305,9 @@ void rim_against_brighter(const cv::Mat& f, Circle* circle) {
   *circle = std::move(q);
 }
 
+// A sample in linear light: decoded where the samples are sRGB-encoded.
+double to_linear(double v, bool srgb) { return srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) : v; }
+
 // The light's brightness above the median, in linear light where the samples are sRGB-encoded:
 // light adds to what the sphere shows in linear light, so an encoded lift over a bright
 // background (a window mirrored beside the highlight) is compressed and a halo spanning it
@@ -314,9 +317,8 @@ cv::Mat linear_lift(const cv::Mat& l, const cv::Mat& base, bool srgb) {
   cv::Mat lift(l.rows, l.cols, CV_32F);
   for (int y = 0; y < l.rows; ++y) {
     for (int x = 0; x < l.cols; ++x) {
-      const double v = std::clamp(static_cast<double>(l.at<float>(y, x)), 0.0, 1.0);
-      const double b = std::clamp(static_cast<double>(base.at<float>(y, x)), 0.0, 1.0);
-      lift.at<float>(y, x) = static_cast<float>(srgb_to_linear(v) - srgb_to_linear(b));
+      lift.at<float>(y, x) = static_cast<float>(to_linear(l.at<float>(y, x), true) -
+                                                to_linear(base.at<float>(y, x), true));
     }
   }
   return lift;
@@ -413,11 +415,10 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     }
     // How far a pixel's brightness climbs from the median toward the clip level, 0..1, in
     // linear light where the samples are sRGB-encoded (see linear_lift).
-    auto linear = [&](double v) { return srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) : v; };
-    const double clip_level = linear(0.98 * top);
+    const double clip_level = to_linear(0.98 * top, srgb);
     auto edge_weight = [&](int x, int y) {
-      const double b = linear(base.at<float>(y, x));
-      const double v = linear(l.at<float>(y, x)) - b;
+      const double b = to_linear(base.at<float>(y, x), srgb);
+      const double v = to_linear(l.at<float>(y, x), srgb) - b;
       const double room = clip_level - b;
       // Where the median itself is (nearly) clipped, the image says nothing of the light.
       return room > 1e-3 ? std::clamp(v / room, 0.0, 1.0) : 0.0;
@@ -668,6 +669,11 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   // with the other spheres' far better. A glass ball's refracted hot spot (the light it
   // focuses, seen through it) can be larger than its reflection and does not obey mirror
   // geometry; the reflections on every sphere agree on one distant light.
+  // Sphere k shows two comparable spots in image ii.
+  auto two_spots = [&](std::size_t k, std::size_t ii) {
+    const std::vector<Spot>& spots = spots_of[k][ii];
+    return spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift;
+  };
   std::vector<std::vector<int>> rank(k_spheres, std::vector<int>(static_cast<std::size_t>(ev.n)));
   // Per image: the choice agrees across spheres better than every other by the margin.
   std::vector<char> settled(static_cast<std::size_t>(ev.n), 0);
@@ -677,9 +683,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       std::vector<int> choices(k_spheres, 1);
       bool ambiguous = false;
       for (std::size_t k = 0; k < k_spheres; ++k) {
-        const std::vector<Spot>& sp = spots_of[k][ii];
-        if (sp.empty()) choices[k] = 0;
-        if (sp.size() >= 2 && sp[1].lift >= 0.5 * sp[0].lift) {
+        if (spots_of[k][ii].empty()) choices[k] = 0;
+        if (two_spots(k, ii)) {
           choices[k] = 2;
           ambiguous = true;
         }
@@ -708,9 +713,10 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         }
         return sum;
       };
-      std::vector<int> pick(k_spheres, 0), best = pick;
+      std::vector<int> pick(k_spheres, 0);
       const double brightest = cost(pick);
       double best_cost = brightest;
+      int best = 0;  // bit k: sphere k's rank
       const int combos = 1 << k_spheres;
       std::vector<std::pair<int, double>> costs;  // valid combinations (bit k: sphere k's rank)
       costs.emplace_back(0, brightest);
@@ -725,7 +731,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         costs.emplace_back(m, c);
         if (c < best_cost) {
           best_cost = c;
-          best = pick;
+          best = m;
         }
       }
       // The spots' coarse positions (analysis pixels) give directions to a degree or two; a
@@ -733,9 +739,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       int chosen = 0;
       double chosen_cost = brightest;
       if (best_cost < brightest - kSpotAgreementMarginDeg) {
-        for (std::size_t k = 0; k < k_spheres; ++k) rank[k][ii] = best[k];
-        chosen = 0;
-        for (std::size_t k = 0; k < k_spheres; ++k) chosen |= best[k] << k;
+        for (std::size_t k = 0; k < k_spheres; ++k) rank[k][ii] = (best >> k) & 1;
+        chosen = best;
         chosen_cost = best_cost;
       }
       int seen = 0;
@@ -747,11 +752,6 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       settled[ii] = clear ? 1 : 0;
     }
   }
-  // Two comparable spots: images where any sphere shows them decide the material (kAuto).
-  auto two_spots = [&](std::size_t k, std::size_t ii) {
-    const std::vector<Spot>& spots = spots_of[k][ii];
-    return spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift;
-  };
   // A glass ball's refracted hot spot lies across the centre from its surface reflection (the
   // ball focuses the light on its far side); a second spot beside the first (a flare's spoke,
   // a reflection of the lit scene) says nothing of glass.
