@@ -140,6 +140,14 @@ constexpr double kEdgeVsHaloPx = 0.3;
 // this much (sum of pairwise angles, degrees).
 constexpr double kSpotAgreementMarginDeg = 3.0;
 
+// A light is far brighter than anything it lights: its reflection lifts the sphere, in linear
+// light, by at least this share of what the sphere's highlights lift it by (their upper
+// quartile over the stack). A fainter spot is the lit scene mirrored in the sphere or noise on a
+// bright static reflection, seen where the light's own reflection is hidden (behind the
+// sphere, or under its base). On the photographic renders every highlight lifts by 0.92-1.0
+// and the brightest such spot by at most 0.11.
+constexpr double kLightLiftShare = 0.25;
+
 // The full-resolution circle is chosen by the rim points within this distance (see
 // consensus_circle).
 constexpr double kRimChoiceTolPx = 1.0;
@@ -664,6 +672,29 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       spots_of[k][static_cast<std::size_t>(i)] = moving_spots(ev, i, cs, rs, det.min_peak);
     }
   }
+  // Spots too faint to be a light's reflection (kLightLiftShare) are dropped; an image left
+  // without one says so.
+  std::vector<std::vector<double>> faint_lift(
+      k_spheres, std::vector<double>(static_cast<std::size_t>(ev.n), 0.0));
+  std::vector<double> light_lift(k_spheres, 0.0);
+  for (std::size_t k = 0; k < k_spheres; ++k) {
+    std::vector<double> brightest;
+    for (const std::vector<Spot>& spots : spots_of[k]) {
+      double b = 0.0;
+      for (const Spot& sp : spots) b = std::max(b, sp.lift_linear);
+      if (!spots.empty()) brightest.push_back(b);
+    }
+    if (brightest.empty()) continue;
+    const auto q = static_cast<std::ptrdiff_t>(3 * (brightest.size() - 1) / 4);
+    std::nth_element(brightest.begin(), brightest.begin() + q, brightest.end());
+    light_lift[k] = brightest[static_cast<std::size_t>(q)];
+    for (std::size_t ii = 0; ii < spots_of[k].size(); ++ii) {
+      std::vector<Spot>& spots = spots_of[k][ii];
+      for (const Spot& sp : spots) faint_lift[k][ii] = std::max(faint_lift[k][ii], sp.lift_linear);
+      std::erase_if(
+          spots, [&](const Spot& sp) { return sp.lift_linear < kLightLiftShare * light_lift[k]; });
+    }
+  }
   // Which spot is the light's reflection: the brightest (a saturated one: the larger), unless
   // with two or more spheres a second spot of comparable lift gives a direction that agrees
   // with the other spheres' far better. A glass ball's refracted hot spot (the light it
@@ -788,7 +819,17 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       SphereLight& light = reports[k].lights[ii];
       const std::vector<Spot>& spots = spots_of[k][ii];
       if (spots.empty()) {
-        light.flag = "no highlight on the sphere: nothing brighter than in the other images";
+        if (faint_lift[k][ii] > 0.0) {
+          char why[200];
+          std::snprintf(why, sizeof why,
+                        "no highlight on the sphere: its brightest spot lifts it by %.3f (linear "
+                        "light), under a quarter of what its highlights do (%.3f): the lit scene "
+                        "mirrored, or noise; the light's reflection is hidden",
+                        faint_lift[k][ii], light_lift[k]);
+          light.flag = why;
+        } else {
+          light.flag = "no highlight on the sphere: nothing brighter than in the other images";
+        }
         continue;
       }
       const int r = rank[k][ii];

@@ -106,6 +106,7 @@ struct Evidence {
   cv::Mat full_max, full_mean;                    // CV_32F, photo size
   cv::Mat small_max, small_median, small_mean;    // CV_32F, analysis size
   cv::Mat reference;                              // CV_32F photo size, or empty
+  bool srgb = true;                               // the samples are sRGB-encoded (else linear)
   [[nodiscard]] float at(int i, int x, int y) const {
     return static_cast<float>(small[static_cast<std::size_t>(i)][static_cast<std::size_t>(y) * sw +
                                                                  static_cast<std::size_t>(x)]) /
@@ -128,6 +129,7 @@ struct Spot {
   Eigen::Vector2d centre_small;  // analysis pixels, weighted by brightness above the median
   double peak = 0.0;             // image luma at the spot's brightest pixel
   double lift = 0.0;             // brightest (image - median)
+  double lift_linear = 0.0;      // the same in linear light
   int area = 0;                  // analysis pixels
   cv::Rect box;                  // analysis pixels
 };

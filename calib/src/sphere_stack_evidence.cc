@@ -15,6 +15,7 @@ Evidence gather(const Source& src, int max_side) {
   ev.w = src.width();
   ev.h = src.height();
   ev.n = src.count();
+  ev.srgb = src.colour_space() == ColourSpace::kSRGB;
   ev.scale = std::max(1, (std::max(ev.w, ev.h) + max_side - 1) / max_side);
   ev.sw = (ev.w + ev.scale - 1) / ev.scale;
   ev.sh = (ev.h + ev.scale - 1) / ev.scale;
@@ -142,6 +143,11 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
       sx[static_cast<std::size_t>(l - 1)] += wgt * (x + x0);
       sy[static_cast<std::size_t>(l - 1)] += wgt * (y + y0);
       s.lift = std::max(s.lift, d);
+      const double v = ev.at(i, x + x0, y + y0);
+      const double m = ev.small_median.at<float>(y + y0, x + x0);
+      s.lift_linear = std::max(s.lift_linear, ev.srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) -
+                                                            srgb_to_linear(std::clamp(m, 0.0, 1.0))
+                                                      : v - m);
       s.peak = std::max(s.peak, static_cast<double>(ev.at(i, x + x0, y + y0)));
     }
   }
