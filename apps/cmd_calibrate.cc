@@ -68,6 +68,8 @@ struct SphereArgs {
   std::string reference;
   double min_score = 0.5;
   std::string sphere_material = "auto";
+  bool no_exif_focal = false;
+  bool focal_px_given = false;  // --focal-px on the command line (even 0: orthographic)
   bool overlay_full_size = false;
   int overlay_max_side = 1600;
   calib::SphereOptions options;
@@ -118,6 +120,12 @@ void run_sphere(const SphereArgs& args) {
   camera.focal_mm = args.focal_mm;
   camera.sensor_width_mm = args.sensor_width_mm;
   camera.focal_px = options.detection.camera.focal_px;
+  if (!args.no_exif_focal && !args.focal_px_given && args.camera.empty() &&
+      !(args.focal_mm > 0.0)) {
+    const calib::PhotoFocal exif = calib::focal_from_exif(files);
+    camera.exif_focal_px = exif.focal_px;
+    camera.exif_note = exif.note;
+  }
   if (!args.principal.empty()) camera.principal_px = parse_vector2(args.principal, "--principal");
   try {
     options.detection.camera = calib::resolve_sphere_camera(camera, first.width, first.height);
@@ -209,6 +217,12 @@ void run_sphere(const SphereArgs& args) {
                 result.two_spot_images, files.size(), calib::to_string(result.material),
                 result.material_note.c_str());
   }
+  if (result.camera.focal_px > 0.0) {
+    std::printf("calibrate sphere: camera focal length %.1f px, from %s\n", result.camera.focal_px,
+                result.camera.focal_source.c_str());
+  } else {
+    std::printf("calibrate sphere: camera focal length %s\n", result.camera.focal_source.c_str());
+  }
   std::printf("calibrate sphere: %s model%s; %d of %zu lights usable, %d outliers%s -> %s%s%s\n",
               report.model.c_str(), report.refined ? ", refined" : "", report.usable(),
               report.lights.size(), report.outliers(), dropped > 0 ? " (dropped)" : "",
@@ -299,10 +313,16 @@ void add_calibrate_command(CLI::App& root) {
   sp->add_flag("--drop-outliers", sphere->drop_outliers,
                "Leave the lights flagged as outliers out of the light file");
   sp->add_option("--mask", sphere->mask, "A mask image of the sphere (pixels > 0.5)");
-  sp->add_option("--focal-px", sphere->options.camera.focal_px,
-                 "Focal length in pixels for the perspective model (0 = orthographic)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+  CLI::Option* focal_px =
+      sp->add_option("--focal-px", sphere->options.camera.focal_px,
+                     "Focal length in pixels for the perspective model (0 = orthographic). "
+                     "Default: the photographs' EXIF focal length (FocalLength with the "
+                     "sensor's FocalPlaneXResolution, else FocalLengthIn35mmFilm), when every "
+                     "photograph gives the same; else orthographic")
+          ->check(CLI::NonNegativeNumber);
+  sp->add_flag("--no-exif-focal", sphere->no_exif_focal,
+               "Ignore the photographs' EXIF focal length (orthographic camera unless "
+               "--focal-px, --focal-mm or --camera says otherwise)");
   sp->add_option("--camera", sphere->camera,
                  "Intrinsics (.json from `ptmkit calibrate camera`): focal length and principal "
                  "point for the perspective model");
@@ -358,7 +378,10 @@ void add_calibrate_command(CLI::App& root) {
                  "Downscaled overlays' longest side, pixels")
       ->capture_default_str()
       ->check(CLI::Range(64, 100000));
-  sp->callback([sphere] { run_sphere(*sphere); });
+  sp->callback([sphere, focal_px] {
+    sphere->focal_px_given = focal_px->count() > 0;
+    run_sphere(*sphere);
+  });
   add_calibrate_board_commands(cmd);
 }
 

@@ -78,12 +78,13 @@ struct PhotoFlagOptions {
   CLI::Option* focal_px = nullptr;
   CLI::Option* light_radius = nullptr;
   CLI::Option* supersample = nullptr;
+  CLI::Option* no_exif = nullptr;
   [[nodiscard]] std::vector<CLI::Option*> all() const {
     return {spheres_material, sphere_count,  no_bases,     no_object,
             environment,      windows,       lamps,        no_scene_reflections,
             distractor,       no_flare,      flare_spokes, flare_strength,
             no_bloom,         no_vignetting, vignetting,   no_noise,
-            focal_px,         light_radius,  supersample};
+            focal_px,         light_radius,  supersample,  no_exif};
   }
 };
 
@@ -194,6 +195,13 @@ void add_synth_command(CLI::App& root) {
   p.light_radius = cmd->add_option("--light-radius", flags->light_radius_deg,
                                    "Photo presets: angular radius of each light, degrees "
                                    "(default 0.6)");
+  p.no_exif =
+      cmd->add_flag("--no-exif")
+          ->description(
+              "Photo presets: no EXIF camera block in the JPEG files (by default they record the "
+              "focal length as a camera does: FocalLength on a 23.5 mm wide sensor, its pixel "
+              "pitch, "
+              "the 35 mm equivalent)");
   p.supersample = cmd->add_option("--supersample", flags->supersample,
                                   "Photo presets: sub-samples per pixel side on edges and "
                                   "highlights, 1..16 (default 4)");
@@ -255,6 +263,7 @@ void add_synth_command(CLI::App& root) {
       if (p.no_noise->count() > 0) o.artefacts.noise = false;
       if (p.light_radius->count() > 0) o.light_radius_deg = f.light_radius_deg;
       if (p.supersample->count() > 0) o.supersample = f.supersample;
+      if (p.no_exif->count() > 0) o.exif_sensor_width_mm = 0.0;
       ThreadLimit limit(f.threads);
       const synth::PhotoReport report = synth::render_photo_capture(o, f.out);
       std::printf("synth: wrote %d images (%dx%d, %s, %zu %s sphere(s)) to %s in %.2f s\n",

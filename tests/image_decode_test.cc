@@ -551,5 +551,126 @@ TEST(FitInputCli, LightFileThatIsADeviceFailsFast) {
   EXPECT_THAT(r.err, HasSubstr("not a regular file"));
 }
 
+// ---- The focal length cameras record in EXIF ----
+
+// One entry of a big-endian EXIF IFD: SHORT (type 3) and LONG (4) hold `a`; RATIONAL (5)
+// holds a / b, stored after the IFD. `count` other than 1 makes a malformed entry.
+struct ExifEntry {
+  unsigned tag = 0;
+  unsigned type = 3;
+  std::uint32_t a = 0;
+  std::uint32_t b = 1;
+  std::uint32_t count = 1;
+  bool bad_offset = false;  // a RATIONAL whose offset points past the block
+};
+
+// A big-endian EXIF block: IFD0 with the EXIF IFD pointer (and the orientation, when given),
+// then the EXIF IFD with `entries`.
+std::string exif_block(const std::vector<ExifEntry>& entries, unsigned orientation = 0) {
+  std::string b;
+  auto u16 = [&](unsigned v) {
+    b += static_cast<char>((v >> 8) & 0xFF);
+    b += static_cast<char>(v & 0xFF);
+  };
+  auto u32 = [&](std::uint32_t v) {
+    for (int k = 3; k >= 0; --k) b += static_cast<char>((v >> (8 * k)) & 0xFF);
+  };
+  b = {'M', 'M', 0, 42};
+  u32(8);
+  const std::uint32_t exif_ifd = orientation > 0 ? 38 : 26;
+  u16(orientation > 0 ? 2 : 1);
+  if (orientation > 0) u16(0x0112), u16(3), u32(1), u16(orientation), u16(0);
+  u16(0x8769), u16(4), u32(1), u32(exif_ifd);
+  u32(0);
+  u16(static_cast<unsigned>(entries.size()));
+  std::uint32_t values = exif_ifd + 2 + 12 * static_cast<std::uint32_t>(entries.size()) + 4;
+  std::string tail;
+  for (const ExifEntry& e : entries) {
+    u16(e.tag), u16(e.type), u32(e.count);
+    if (e.type == 3) {
+      u16(e.a), u16(0);
+    } else if (e.type == 4) {
+      u32(e.a);
+    } else {
+      u32(e.bad_offset ? 100000 : values);
+      const std::string save = b;
+      b.clear();
+      u32(e.a), u32(e.b);
+      tail += b;
+      b = save;
+      values += 8;
+    }
+  }
+  u32(0);
+  return b + tail;
+}
+
+// A JPEG's bytes with an EXIF APP1 segment holding `tiff` inserted after the SOI.
+std::string with_exif(const std::string& jpeg, const std::string& tiff) {
+  const std::string payload = std::string("Exif\0\0", 6) + tiff;
+  const std::size_t len = payload.size() + 2;
+  std::string seg = {static_cast<char>(0xFF), static_cast<char>(0xE1), static_cast<char>(len >> 8),
+                     static_cast<char>(len & 0xFF)};
+  return jpeg.substr(0, 2) + seg + payload + jpeg.substr(2);
+}
+
+TEST(ImageDecode, FocalLengthInPixelsFromTheCamerasExif) {
+  test::ScratchDir dir;
+  const int w = 40, h = 30;
+  write_image(dir / "base.jpg", pattern(w, h, 3).view());
+  const std::string bytes = slurp(dir / "base.jpg");
+  EXPECT_EQ(probe_image(dir / "base.jpg").focal_px, 0.0);  // no EXIF: not said
+  const auto focal = [&](const std::vector<ExifEntry>& entries, std::string* evidence = nullptr) {
+    spit(dir / "e.jpg", with_exif(bytes, exif_block(entries)));
+    const ImageInfo info = probe_image(dir / "e.jpg");
+    if (evidence != nullptr) *evidence = info.focal_evidence;
+    return info.focal_px;
+  };
+  // A 50 mm lens, 4000 sensor pixels per inch, the camera's image 6000 pixels wide (a 38 mm
+  // sensor) and this copy 40: 50 mm x 4000 / 25.4 pixels per mm x 40 / 6000.
+  const ExifEntry lens{0x920A, 5, 50, 1};
+  const ExifEntry pitch{0xA20E, 5, 4000, 1};
+  const ExifEntry inch{0xA210, 3, 2};
+  const ExifEntry recorded{0xA002, 4, 6000};
+  const ExifEntry equivalent{0xA405, 3, 28};
+  std::string evidence;
+  EXPECT_NEAR(focal({lens, recorded, pitch, inch, equivalent}, &evidence),
+              50.0 * 4000.0 / 25.4 * w / 6000.0, 1e-9);
+  EXPECT_THAT(evidence, HasSubstr("FocalPlaneXResolution"));
+  // The pitch in pixels per cm, for this width (no PixelXDimension: a 2.5 mm sensor).
+  EXPECT_NEAR(focal({lens, {0xA20E, 5, 160, 1}, {0xA210, 3, 3}}), 50.0 * 16.0, 1e-9);
+  // Only the 35 mm equivalent: over the frame's diagonal (43.27 mm).
+  const double from_equivalent = 28.0 * std::hypot(w, h) / std::hypot(36.0, 24.0);
+  EXPECT_NEAR(focal({equivalent}, &evidence), from_equivalent, 1e-9);
+  EXPECT_THAT(evidence, HasSubstr("FocalLengthIn35mmFilm"));
+  // A pitch implying a sensor over 100 mm wide is not believed: the equivalent is taken.
+  EXPECT_NEAR(focal({lens, {0xA20E, 5, 1, 1}, inch, equivalent}), from_equivalent, 1e-9);
+  // The lens alone gives no pixels; malformed entries are ignored.
+  EXPECT_EQ(focal({lens}), 0.0);
+  EXPECT_EQ(focal({{0x920A, 5, 50, 1, 1, true}, pitch, inch}), 0.0);
+  EXPECT_EQ(focal({lens, {0xA20E, 5, 4000, 0}, inch}), 0.0);  // zero denominator
+  EXPECT_EQ(focal({{0xA405, 3, 28, 1, 2}}), 0.0);             // two values
+  EXPECT_EQ(focal({lens, pitch, {0xA210, 3, 9}}), 0.0);       // unknown unit
+  // The same in pixels whatever the orientation.
+  spit(dir / "r.jpg", with_exif(bytes, exif_block({lens, recorded, pitch, inch}, 6)));
+  const ImageInfo rotated = probe_image(dir / "r.jpg");
+  EXPECT_EQ(rotated.orientation, 6);
+  EXPECT_EQ(rotated.width, h);
+  EXPECT_NEAR(rotated.focal_px, 50.0 * 4000.0 / 25.4 * w / 6000.0, 1e-9);
+}
+
+TEST(ImageDecode, JpegWrittenWithACameraRecordsItsFocalLength) {
+  test::ScratchDir dir;
+  ImageWriteOptions o;
+  o.exif_camera = ImageWriteOptions::ExifCamera{47.0, 23.5};
+  write_image(dir / "c.jpg", pattern(64, 36, 3).view(), o);
+  const ImageInfo info = probe_image(dir / "c.jpg");
+  EXPECT_NEAR(info.focal_px, 47.0 / 23.5 * 64, 1e-3);
+  EXPECT_THAT(info.focal_evidence, HasSubstr("FocalLength 47 mm"));
+  o.exif_camera = ImageWriteOptions::ExifCamera{0.0, 23.5};
+  EXPECT_THROW(write_image(dir / "bad.jpg", pattern(64, 36, 3).view(), o), Error);
+  EXPECT_FALSE(fs::exists(dir / "bad.jpg"));
+}
+
 }  // namespace
 }  // namespace ptmkit

@@ -1,5 +1,6 @@
 #include "ptmkit/calib/camera.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -13,6 +14,7 @@
 
 #include "ptmkit/core/atomic_file.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/image_io.h"
 #include "ptmkit/core/json_file.h"
 
 namespace ptmkit::calib {
@@ -167,19 +169,68 @@ SphereCamera resolve_sphere_camera(const CameraSource& source, int width_px, int
         "give the focal length once: a camera file, a lens in mm or a focal length in pixels");
   }
   SphereCamera cam;
+  char text[200];
   if (!source.camera_json.empty()) {
     cam = sphere_camera(read_camera_json(source.camera_json), width_px, height_px,
                         source.camera_json);
+    cam.focal_source = "camera file " + source.camera_json.string();
   } else if (source.focal_mm > 0.0) {
     if (!(source.sensor_width_mm > 0.0)) {
       throw Error("a lens focal length in mm needs the sensor's width in mm");
     }
     cam.focal_px = focal_px_from_lens(source.focal_mm, source.sensor_width_mm, width_px);
-  } else {
+    std::snprintf(text, sizeof text, "a %.4g mm lens on a %.4g mm wide sensor", source.focal_mm,
+                  source.sensor_width_mm);
+    cam.focal_source = text;
+  } else if (source.focal_px > 0.0) {
     cam.focal_px = source.focal_px;
+    cam.focal_source = "--focal-px";
+  } else if (source.exif_focal_px > 0.0) {
+    cam.focal_px = source.exif_focal_px;
+    cam.focal_source = "the photographs' " + source.exif_note;
+  } else {
+    cam.focal_source = "none: orthographic camera" +
+                       (source.exif_note.empty() ? std::string() : " (" + source.exif_note + ")");
   }
   if (source.principal_px) cam.principal_px = source.principal_px;
   return cam;
+}
+
+PhotoFocal focal_from_exif(const std::vector<std::filesystem::path>& photos) {
+  PhotoFocal out;
+  if (photos.empty()) return out;
+  double lo = 0.0, hi = 0.0;
+  int with = 0;
+  std::string evidence;
+  for (const std::filesystem::path& p : photos) {
+    const ImageInfo info = probe_image(p);
+    if (!(info.focal_px > 0.0)) continue;
+    if (with == 0) {
+      lo = hi = info.focal_px;
+      evidence = info.focal_evidence;
+    }
+    lo = std::min(lo, info.focal_px);
+    hi = std::max(hi, info.focal_px);
+    ++with;
+  }
+  char text[300];
+  if (with == 0) {
+    out.note = "no EXIF focal length in the photographs";
+  } else if (with < static_cast<int>(photos.size())) {
+    std::snprintf(text, sizeof text, "EXIF focal length in %d of %zu photographs only: not used",
+                  with, photos.size());
+    out.note = text;
+  } else if (hi > 1.005 * lo) {
+    std::snprintf(text, sizeof text,
+                  "EXIF focal lengths differ between the photographs (%.1f to %.1f px: the zoom "
+                  "turned during the capture?): not used",
+                  lo, hi);
+    out.note = text;
+  } else {
+    out.focal_px = lo;
+    out.note = evidence;
+  }
+  return out;
 }
 
 double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px) {

@@ -336,7 +336,7 @@ cv::Mat linear_lift(const cv::Mat& l, const cv::Mat& base, bool srgb) {
 // `inside` tells photo pixels on the sphere's searched disc, `srgb` that the samples are
 // sRGB-encoded.
 Located locate(const Window& win, const cv::Mat& base, const std::function<bool(int, int)>& inside,
-               bool srgb, double core_radius_hint = 0.0) {
+               bool srgb, double core_radius_hint = 0.0, double compact_max_pixels = 0.0) {
   Located out;
   std::optional<Eigen::Vector2d> disc_centre;  // window pixels, see cut_to_disc
   const cv::Mat& l = win.luma;
@@ -379,12 +379,13 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     auto static_clip = [&](int x, int y) { return base.at<float>(y, x) >= 0.9 * top; };
     // The light's clipped component is the thickest (a streak may be longer, never thicker):
     // the largest inscribed radius, then the larger area. Thickness counts the pixels that
-    // are not clipped in the median: a static reflection clipped in every image is no
-    // light's core, however thick.
+    // are dark in the median (below half the clip): a static reflection clipped in every
+    // image is no light's core, however thick, nor is a bright one (a lamp mirrored beside
+    // the light) that only the light's glow lifts to the clip.
     cv::Mat moving = clipped.clone();
     for (int y = 0; y < l.rows; ++y) {
       for (int x = 0; x < l.cols; ++x) {
-        if (static_clip(x, y)) moving.at<std::uint8_t>(y, x) = 0;
+        if (base.at<float>(y, x) >= 0.5 * top) moving.at<std::uint8_t>(y, x) = 0;
       }
     }
     cv::Mat cpad, cdist;
@@ -399,13 +400,21 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
         depth[j] = std::max(depth[j], cdist.at<float>(y + 1, x + 1));
       }
     }
+    // Given compact_max_pixels (glass), a component larger than a compact highlight can be is
+    // passed over while a compact one is left: a glass ball's refracted hot spot is a broad
+    // clipped area, and under a light near the camera's axis the surface reflection, a small
+    // clipped dot, lies beside it or in its glow.
+    auto compact = [&](std::size_t j) {
+      return compact_max_pixels <= 0.0 || area[j] <= compact_max_pixels;
+    };
     int best = 0;
     for (int j = 1; j < k; ++j) {
       const auto jj = static_cast<std::size_t>(j), bb = static_cast<std::size_t>(best);
-      if (best == 0 || depth[jj] > depth[bb] + 0.25f ||
-          (std::abs(depth[jj] - depth[bb]) <= 0.25f && area[jj] > area[bb])) {
-        best = j;
-      }
+      const bool better = best == 0 || (compact(jj) && !compact(bb)) ||
+                          (compact(jj) == compact(bb) &&
+                           (depth[jj] > depth[bb] + 0.25f ||
+                            (std::abs(depth[jj] - depth[bb]) <= 0.25f && area[jj] > area[bb])));
+      if (better) best = j;
     }
     cv::Mat region = labels == best;
     // JPEG's noise leaves pixels of a clipped core a few levels below the clip; the opening
@@ -432,13 +441,13 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
       return room > 1e-3 ? std::clamp(v / room, 0.0, 1.0) : 0.0;
     };
     if (core_radius_hint > 0.0) {
-      // Beside a static clipped reflection, only a boundary pixel with an unclipped
-      // neighbour lit above the median (the light's halo) is the light's edge, and only one
-      // that is dark in the median: where the median is bright the pixel belongs to the
-      // reflection, whose blurred rim the light's glow lifts as well.
+      // Only a boundary pixel dark in the median is the light's edge: where the median is
+      // bright the pixel belongs to a reflection beside the light (a window, a lamp) which
+      // the light's glow has lifted to the clip. Beside a static clipped reflection, only
+      // one with an unclipped neighbour lit above the median (the light's halo) as well.
       auto light_edge = [&](int x, int y) {
-        if (!out.touches_static) return true;
         if (base.at<float>(y, x) >= 0.5 * top) return false;
+        if (!out.touches_static) return true;
         constexpr int kDx[4] = {1, -1, 0, 0}, kDy[4] = {0, 0, 1, -1};
         for (int d = 0; d < 4; ++d) {
           const int nx = x + kDx[d], ny = y + kDy[d];
@@ -591,6 +600,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   }
   if (so.analysis_max_side_px < 64) throw Error("sphere: the analysis size must be >= 64 pixels");
   StackCalibration out;
+  out.camera = rig.detection.camera;
   Evidence ev = gather(src, so.analysis_max_side_px);
   out.analysis_scale = ev.scale;
   out.width = ev.w;
@@ -908,7 +918,11 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         base.at<float>(y, x) = ev.small_median.at<float>(sy, sx);
       }
     }
-    located[q] = locate(windows[q], base, inside_of(q), srgb);
+    const Circle& c = circles[static_cast<std::size_t>(wt.sphere)];
+    located[q] = locate(windows[q], base, inside_of(q), srgb, 0.0,
+                        out.material == SphereMaterial::kGlass
+                            ? sphere_area_factor * c.radius_px * c.radius_px
+                            : 0.0);
   }
   // A sphere's clipped cores are the light's image, of one size in every image (a mirror's
   // disc): a core far larger than the sphere's median has merged with something clipped
@@ -1062,6 +1076,8 @@ std::string StackCalibration::to_json() const {
   j["two_spot_images"] = two_spot_images;
   j["material"] = to_string(material);
   j["material_note"] = material_note;
+  j["focal_px"] = camera.focal_px;
+  j["focal_source"] = camera.focal_source;
   j["candidates"] = nlohmann::json::array();
   for (const SphereCandidate& c : candidates) {
     j["candidates"].push_back({{"centre_px", {c.circle.centre_px.x(), c.circle.centre_px.y()}},

@@ -87,6 +87,8 @@ class JpegDecoder final : public Decoder {
         exif_seen = true;
         const ExifFacts exif = parse_exif(m->data + 6, m->data_length - 6);
         header_.orientation = exif.orientation;
+        header_.focal_px =
+            exif_focal_px(exif, header_.width, header_.height, &header_.focal_evidence);
         if (exif.colour_space_tag == 1 && !header_.has_colour_metadata) {
           header_.has_colour_metadata = true;
           header_.colour_space = ColourSpace::kSRGB;

@@ -108,7 +108,10 @@ class PngDecoder final : public Decoder {
     png_bytep exif = nullptr;
     png_uint_32 exif_bytes = 0;
     if (png_get_eXIf_1(png_, info_, &exif_bytes, &exif) != 0 && exif != nullptr) {
-      header_.orientation = parse_exif(exif, exif_bytes).orientation;
+      const ExifFacts facts = parse_exif(exif, exif_bytes);
+      header_.orientation = facts.orientation;
+      header_.focal_px =
+          exif_focal_px(facts, header_.width, header_.height, &header_.focal_evidence);
     }
 #endif
   }

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 
@@ -80,6 +81,8 @@ ImageInfo info_from_header(const Header& h) {
   info.channels = h.channels;
   info.format = h.format;
   info.orientation = h.orientation;
+  info.focal_px = h.focal_px;
+  info.focal_evidence = h.focal_evidence;
   if (h.has_colour_metadata) {
     info.colour_space = h.colour_space;
     info.colour_from_metadata = true;
@@ -127,14 +130,41 @@ ExifFacts parse_exif(const unsigned char* data, std::size_t size) {
       if (at + 12 > size) break;
       const unsigned tag = u16(at);
       const unsigned type = u16(at + 2);
-      if (type != 3 && tag != 0x8769) continue;  // SHORT values, or the EXIF IFD pointer
-      if (top && tag == 0x0112) {
+      const std::size_t count = u32(at + 4);
+      // An integer held in the entry (SHORT, or LONG), or -1.
+      const auto integer = [&]() -> long {
+        if (count != 1) return -1;
+        if (type == 3) return static_cast<long>(u16(at + 8));
+        if (type == 4) return static_cast<long>(u32(at + 8));
+        return -1;
+      };
+      // An unsigned RATIONAL (stored at an offset), or 0 when malformed.
+      const auto rational = [&]() -> double {
+        if (type != 5 || count != 1) return 0.0;
+        const std::size_t off = u32(at + 8);
+        if (off < 8 || off + 8 > size) return 0.0;
+        const double num = static_cast<double>(u32(off)), den = static_cast<double>(u32(off + 4));
+        return den > 0.0 ? num / den : 0.0;
+      };
+      if (top && tag == 0x0112 && type == 3) {
         const unsigned v = u16(at + 8);
         if (v >= 1 && v <= 8) facts.orientation = static_cast<int>(v);
       } else if (top && tag == 0x8769) {
         sub = u32(at + 8);
-      } else if (tag == 0xA001) {
+      } else if (top) {
+        continue;
+      } else if (tag == 0xA001 && type == 3) {
         facts.colour_space_tag = static_cast<int>(u16(at + 8));
+      } else if (tag == 0x920A) {
+        facts.focal_mm = rational();
+      } else if (tag == 0xA20E) {
+        facts.focal_plane_x_res = rational();
+      } else if (tag == 0xA210 && integer() >= 0) {
+        facts.focal_plane_unit = static_cast<int>(integer());
+      } else if (tag == 0xA002 && integer() >= 0) {
+        facts.pixel_x_dimension = integer();
+      } else if (tag == 0xA405 && integer() >= 0) {
+        facts.focal_35mm = static_cast<double>(integer());
       }
     }
     return sub;
@@ -142,6 +172,55 @@ ExifFacts parse_exif(const unsigned char* data, std::size_t size) {
   const std::size_t sub = walk(u32(4), true);
   if (sub != 0 && sub != u32(4)) walk(sub, false);
   return facts;
+}
+
+double exif_focal_px(const ExifFacts& exif, int stored_width, int stored_height,
+                     std::string* evidence) {
+  char text[160];
+  if (exif.focal_mm > 0.0 && exif.focal_plane_x_res > 0.0 && stored_width > 0) {
+    double unit_mm = 0.0;
+    switch (exif.focal_plane_unit) {
+      case 2:
+        unit_mm = 25.4;
+        break;
+      case 3:
+        unit_mm = 10.0;
+        break;
+      case 4:
+        unit_mm = 1.0;
+        break;
+      case 5:
+        unit_mm = 0.001;
+        break;
+      default:
+        break;
+    }
+    if (unit_mm > 0.0) {
+      // The pitch is the recorded width's; a smaller stored copy has larger pixels.
+      double px_per_mm = exif.focal_plane_x_res / unit_mm;
+      if (exif.pixel_x_dimension > 0) {
+        px_per_mm *=
+            static_cast<double>(stored_width) / static_cast<double>(exif.pixel_x_dimension);
+      }
+      const double sensor_mm = stored_width / px_per_mm;
+      if (sensor_mm >= 1.0 && sensor_mm <= 100.0) {
+        std::snprintf(text, sizeof text,
+                      "EXIF FocalLength %.4g mm, FocalPlaneXResolution (sensor %.2f mm wide)",
+                      exif.focal_mm, sensor_mm);
+        if (evidence != nullptr) *evidence = text;
+        return exif.focal_mm * px_per_mm;
+      }
+    }
+  }
+  if (exif.focal_35mm > 0.0 && stored_width > 0 && stored_height > 0) {
+    const double diagonal_px =
+        std::hypot(static_cast<double>(stored_width), static_cast<double>(stored_height));
+    std::snprintf(text, sizeof text, "EXIF FocalLengthIn35mmFilm %.0f mm (over the diagonal)",
+                  exif.focal_35mm);
+    if (evidence != nullptr) *evidence = text;
+    return exif.focal_35mm * diagonal_px / std::hypot(36.0, 24.0);
+  }
+  return 0.0;
 }
 
 std::unique_ptr<Decoder> open_decoder(const fs::path& path, const DecodeSettings& settings) {

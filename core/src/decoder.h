@@ -33,6 +33,8 @@ struct Header {
   ColourSpace colour_space = ColourSpace::kSRGB;
   std::string colour_evidence;  // e.g. "PNG sRGB chunk", "EXIF ColorSpace sRGB"
   int orientation = 1;          // EXIF/TIFF orientation 1..8 (1 = as stored)
+  double focal_px = 0.0;        // from EXIF (exif_focal_px); 0 = not given
+  std::string focal_evidence;   // which EXIF tags gave it
   std::string codec;            // "jpeg", "png", "tiff", or "oiio:<format>"
 };
 
@@ -85,13 +87,29 @@ void check_dimensions(const std::filesystem::path& path, long long width, long l
                       long long channels);
 
 // Parses an EXIF block (starting at the TIFF header, "II*\0" or "MM\0*") for the orientation
-// (0x0112) and the ColorSpace tag (0xA001, in the EXIF sub-IFD). Bounded: never reads outside
-// [data, data + size). Unknown or malformed: orientation 1, colour_space_tag 0.
+// (0x0112), and in the EXIF sub-IFD the ColorSpace tag (0xA001) and what gives the focal length
+// in pixels: FocalLength (0x920A), FocalPlaneXResolution (0xA20E) with its unit (0xA210),
+// PixelXDimension (0xA002), FocalLengthIn35mmFilm (0xA405). Bounded: never reads outside
+// [data, data + size). Unknown or malformed: orientation 1, every other field 0.
 struct ExifFacts {
   int orientation = 1;
-  int colour_space_tag = 0;  // 1 = sRGB, 0xFFFF = uncalibrated, 0 = absent
+  int colour_space_tag = 0;        // 1 = sRGB, 0xFFFF = uncalibrated, 0 = absent
+  double focal_mm = 0.0;           // the lens's focal length
+  double focal_plane_x_res = 0.0;  // sensor pixels per focal_plane_unit, across the width
+  int focal_plane_unit = 2;        // 2 inch (the default), 3 cm, 4 mm, 5 micrometre
+  long pixel_x_dimension = 0;      // the width the camera recorded
+  double focal_35mm = 0.0;         // the 35 mm film equivalent, mm
 };
 ExifFacts parse_exif(const unsigned char* data, std::size_t size);
+
+// The focal length in pixels an image of stored_width x stored_height (before orientation) was
+// taken with, from its EXIF facts; 0 when they do not say. From the lens and the sensor's pixel
+// pitch where both are there (FocalLength x FocalPlaneXResolution, scaled to the stored width
+// where the camera recorded another), else from the 35 mm equivalent over the frame's diagonal
+// (43.27 mm): the equivalent is rounded to a millimetre, so good to a few per cent. A pitch
+// that implies a sensor under 1 mm or over 100 mm wide is not believed. `evidence` says which.
+double exif_focal_px(const ExifFacts& exif, int stored_width, int stored_height,
+                     std::string* evidence);
 
 // The public description of a header: displayed size (orientation applied), colour space from
 // the metadata or the sample type's default (image_io.h), and why.

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <vector>
 
 #include "ptmkit/core/image.h"
 
@@ -16,7 +17,14 @@ void write_png(const std::filesystem::path& target, const std::filesystem::path&
 // Writes tightly packed 8-bit grey or RGB samples as JPEG (baseline, `quality` 1..100, the
 // library's default 4:2:0 chroma and accurate integer DCT) into `path`. Every libjpeg error
 // (a full disk included) and the close throw ptmkit::Error naming `target`.
+// `exif`, when not empty, is written as an APP1 EXIF segment (without the "Exif\0\0" prefix).
 void write_jpeg(const std::filesystem::path& target, const std::filesystem::path& path, int width,
-                int height, int channels, const unsigned char* pixels, int quality);
+                int height, int channels, const unsigned char* pixels, int quality,
+                const std::vector<unsigned char>& exif = {});
+
+// A little-endian EXIF block (TIFF header, IFD0 with the EXIF IFD pointer, the EXIF IFD)
+// recording a camera for an image width_px x height_px: see ImageWriteOptions::exif_camera.
+std::vector<unsigned char> exif_camera_block(double focal_mm, double sensor_width_mm, int width_px,
+                                             int height_px);
 
 }  // namespace ptmkit::internal

@@ -177,8 +177,20 @@ void write_image(const fs::path& path, ConstImageViewF image, const ImageWriteOp
     internal::write_png(path, out_file.temp_path(), image.width, image.height, image.channels,
                         options.format == PixelFormat::kU16, pixels, image.colour_space);
   } else if ((ext == ".jpg" || ext == ".jpeg") && (image.channels == 1 || image.channels == 3)) {
+    std::vector<unsigned char> exif;
+    if (options.exif_camera) {
+      const auto& cam = *options.exif_camera;
+      if (!(cam.focal_mm > 0.0) || !(cam.sensor_width_mm > 0.0) || !std::isfinite(cam.focal_mm) ||
+          !std::isfinite(cam.sensor_width_mm)) {
+        throw Error(where(path) +
+                    ": the EXIF camera needs a positive focal length and sensor "
+                    "width (mm)");
+      }
+      exif =
+          internal::exif_camera_block(cam.focal_mm, cam.sensor_width_mm, image.width, image.height);
+    }
     internal::write_jpeg(path, out_file.temp_path(), image.width, image.height, image.channels,
-                         u8.data(), std::clamp(options.jpeg_quality, 1, 100));
+                         u8.data(), std::clamp(options.jpeg_quality, 1, 100), exif);
   } else {
     internal::oiio_write(path, out_file.temp_path(), image.width, image.height, image.channels,
                          options.format, pixels, stride_bytes, image.colour_space,

@@ -254,6 +254,8 @@ void validate(const PhotoOptions& o) {
     require(o.bits == 8, "jpg output is 8 bits only");
     require(o.jpeg_quality >= 1 && o.jpeg_quality <= 100, "jpeg quality must be 1..100");
   }
+  require(std::isfinite(o.exif_sensor_width_mm) && o.exif_sensor_width_mm >= 0.0,
+          "the EXIF sensor width must be >= 0 mm");
   require(o.supersample >= 1 && o.supersample <= 16, "supersample must be 1..16");
   require(!o.light_dirs.empty() || !o.lights.empty(), "no lights");
 }

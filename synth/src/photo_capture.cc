@@ -88,8 +88,11 @@ PhotoReport render_photo_capture(const PhotoOptions& options, const fs::path& ou
   ensure_directory(out_dir);
   ensure_directory(out_dir / "truth");
 
-  const ImageWriteOptions image_opts{o.bits == 16 ? PixelFormat::kU16 : PixelFormat::kU8,
-                                     o.jpeg_quality};
+  ImageWriteOptions image_opts{o.bits == 16 ? PixelFormat::kU16 : PixelFormat::kU8, o.jpeg_quality};
+  if (o.file_type == FileType::kJpeg && o.exif_sensor_width_mm > 0.0) {
+    image_opts.exif_camera = ImageWriteOptions::ExifCamera{
+        o.focal_px * o.exif_sensor_width_mm / o.width, o.exif_sensor_width_mm};
+  }
   auto one = [&](int i) {
     const Image img = renderer.render(i);
     write_image(out_dir / image_name(i, n, o.file_type), img.view(), image_opts);
@@ -205,12 +208,17 @@ PhotoReport render_photo_capture(const PhotoOptions& options, const fs::path& ou
       {"vignetting", {{"on", a.vignetting}, {"corner_loss", a.vignetting_corner_loss}}},
       {"noise",
        {{"on", a.noise}, {"read_grey", a.read_noise_grey}, {"shot_full_well", a.shot_full_well}}}};
-  j["sensor"] = {{"exposure", o.exposure},
-                 {"colour_space", o.srgb ? "srgb" : "linear"},
-                 {"format", std::string(extension(o.file_type))},
-                 {"bits", o.bits},
-                 {"jpeg_quality", o.file_type == FileType::kJpeg ? nlohmann::json(o.jpeg_quality)
-                                                                 : nlohmann::json(nullptr)}};
+  j["sensor"] = {
+      {"exposure", o.exposure},
+      {"colour_space", o.srgb ? "srgb" : "linear"},
+      {"format", std::string(extension(o.file_type))},
+      {"bits", o.bits},
+      {"jpeg_quality",
+       o.file_type == FileType::kJpeg ? nlohmann::json(o.jpeg_quality) : nlohmann::json(nullptr)},
+      {"exif", image_opts.exif_camera
+                   ? nlohmann::json{{"focal_mm", image_opts.exif_camera->focal_mm},
+                                    {"sensor_width_mm", image_opts.exif_camera->sensor_width_mm}}
+                   : nlohmann::json(nullptr)}};
   write_file_atomic(out_dir / "truth.json", j.dump(2) + "\n");
   report.files.push_back(out_dir / "truth.json");
   report.images = n;

@@ -52,14 +52,28 @@ struct CameraIntrinsics {
 [[nodiscard]] double focal_px_from_lens(double focal_mm, double sensor_width_mm, int width_px);
 void write_camera_json(const std::filesystem::path& path, const CameraIntrinsics& camera);
 
+// The focal length the photographs' EXIF gives (core/image_io.h, ImageInfo::focal_px), when
+// every photograph gives one and they agree within 0.5% (one lens, one zoom setting):
+// focal_px > 0, and `note` says from which tags. Otherwise focal_px is 0 and `note` says why
+// (none says, some do not, or they differ: a zoom turned during the capture). Reads headers
+// only. Throws ptmkit::Error naming an unreadable file.
+struct PhotoFocal {
+  double focal_px = 0.0;
+  std::string note;
+};
+[[nodiscard]] PhotoFocal focal_from_exif(const std::vector<std::filesystem::path>& photos);
+
 // Where a sphere calibration's focal length comes from: at most one of a camera file
 // (`ptmkit calibrate camera`), a lens (focal_mm on a sensor sensor_width_mm wide) or a focal
-// length in pixels; none means an orthographic camera.
+// length in pixels; none of them: the photographs' EXIF focal length (exif_focal_px, from
+// focal_from_exif) where there is one, else an orthographic camera.
 struct CameraSource {
   std::filesystem::path camera_json;  // empty: none
   double focal_mm = 0.0;              // 0: none; needs sensor_width_mm
   double sensor_width_mm = 0.0;
-  double focal_px = 0.0;  // 0: none
+  double focal_px = 0.0;       // 0: none
+  double exif_focal_px = 0.0;  // 0: none; used only when none of the above is given
+  std::string exif_note;       // PhotoFocal::note
   // Overrides the camera file's principal point (pixels); nullopt: the file's, else the image
   // centre.
   std::optional<Eigen::Vector2d> principal_px;

@@ -55,6 +55,9 @@ struct SphereCamera {
   double focal_px = 0.0;
   // Principal point in pixels; nullopt = the image centre.
   std::optional<Eigen::Vector2d> principal_px;
+  // Where focal_px came from, for reports ("--focal-px", "camera file ...", "EXIF ...");
+  // empty: not said.
+  std::string focal_source;
 };
 
 struct SphereOptions {

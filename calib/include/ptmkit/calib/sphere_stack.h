@@ -129,6 +129,9 @@ struct StackCalibration {
   std::string material_note;
   int analysis_scale = 1;
   int width = 0, height = 0;
+  // The camera the highlights were turned into directions with (focal_px 0: orthographic),
+  // and where its focal length came from.
+  SphereCamera camera;
   [[nodiscard]] std::string to_json() const;
 };
 

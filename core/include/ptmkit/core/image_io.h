@@ -19,6 +19,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -61,6 +62,12 @@ struct ImageInfo {
   // EXIF/TIFF orientation, 1..8 (1: stored as displayed). read_image() and the stack reader
   // apply it, so width and height here are as displayed (swapped for 5..8).
   int orientation = 1;
+  // The focal length in pixels the camera recorded in EXIF (JPEG and PNG files), for the
+  // stored width (the same in pixels whatever the orientation); 0 when the file does not say.
+  // From FocalLength and the sensor's pixel pitch (FocalPlaneXResolution) where both are there,
+  // else from the 35 mm equivalent over the frame's diagonal. focal_evidence says which.
+  double focal_px = 0.0;
+  std::string focal_evidence;
 };
 
 // Human-readable name of an EXIF orientation code ("rotate 90 CW", ...).
@@ -84,6 +91,15 @@ struct ImageWriteOptions {
   // Channel names (EXR only; empty = R, G, B, A or Y). OpenEXR sorts channels by name, so
   // names that sort in the intended order keep the layout on reading back.
   std::vector<std::string> channel_names = {};
+  // JPEG only: the camera to record in an EXIF block, as cameras do: FocalLength, the sensor's
+  // pixel pitch (FocalPlaneXResolution, in pixels per cm, for the image's width), the width
+  // recorded (PixelXDimension) and the 35 mm equivalent (FocalLengthIn35mmFilm, over the
+  // diagonal). Read back as ImageInfo::focal_px. nullopt: no EXIF block.
+  struct ExifCamera {
+    double focal_mm = 0.0;         // > 0
+    double sensor_width_mm = 0.0;  // > 0: the image's full width on the sensor
+  };
+  std::optional<ExifCamera> exif_camera = std::nullopt;
 };
 
 // Writes `image` atomically; the view's colour space is recorded in the file's metadata.

@@ -72,7 +72,8 @@
 //           {file, light_dir [x,y,z] (light frame), elevation_deg}
 //   artefacts: {flare {on, spokes, strength, length_frac, angle_deg}, bloom {on, sigma_frac,
 //               strength}, vignetting {on, corner_loss}, noise {on, read_grey, shot_full_well}}
-//   sensor: {exposure, colour_space ("srgb" | "linear"), format, bits, jpeg_quality}
+//   sensor: {exposure, colour_space ("srgb" | "linear"), format, bits, jpeg_quality,
+//            exif {focal_mm, sensor_width_mm} (JPEG with an EXIF block) or null}
 #pragma once
 
 #include <cstdint>
@@ -188,6 +189,9 @@ struct PhotoOptions {
   FileType file_type = FileType::kJpeg;
   int bits = 8;
   int jpeg_quality = 92;
+  // JPEG files carry an EXIF block as a camera's do (FocalLength, the sensor's pixel pitch,
+  // the 35 mm equivalent) for focal_px on a sensor this wide (mm; 23.5: APS-C); 0: none.
+  double exif_sensor_width_mm = 23.5;
   // Sub-samples per pixel side on edges and highlights (the rest: one sample at the centre).
   int supersample = 4;
 };
