@@ -659,6 +659,71 @@ TEST(ImageDecode, FocalLengthInPixelsFromTheCamerasExif) {
   EXPECT_NEAR(rotated.focal_px, 50.0 * 4000.0 / 25.4 * w / 6000.0, 1e-9);
 }
 
+// A PNG's bytes with an eXIf chunk holding `tiff` after the IHDR chunk.
+std::string with_png_exif(const std::string& png, const std::string& tiff) {
+  const std::string body = "eXIf" + tiff;
+  std::uint32_t crc = 0xFFFFFFFFu;
+  for (const char ch : body) {
+    crc ^= static_cast<unsigned char>(ch);
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  crc ^= 0xFFFFFFFFu;
+  auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>((v >> 16) & 0xFF),
+                       static_cast<char>((v >> 8) & 0xFF), static_cast<char>(v & 0xFF)};
+  };
+  const std::size_t after_ihdr = 8 + 25;
+  return png.substr(0, after_ihdr) + be32(static_cast<std::uint32_t>(tiff.size())) + body +
+         be32(crc) + png.substr(after_ihdr);
+}
+
+TEST(ImageDecode, PngExifGivesTheOrientationAndTheFocalLength) {
+  test::ScratchDir dir;
+  const int w = 40, h = 30;
+  write_image(dir / "base.png", pattern(w, h, 3).view());
+  spit(dir / "e.png", with_png_exif(slurp(dir / "base.png"), exif_block({{0xA405, 3, 28}}, 6)));
+  const ImageInfo info = probe_image(dir / "e.png");
+  EXPECT_EQ(info.orientation, 6);
+  EXPECT_EQ(info.width, h);
+  EXPECT_NEAR(info.focal_px, 28.0 * std::hypot(w, h) / std::hypot(36.0, 24.0), 1e-9);
+  EXPECT_EQ(read_image(dir / "e.png").width(), h);
+}
+
+// TIFF files give the same EXIF facts, whether OpenImageIO reads them (as it reads camera RAW
+// and EXR) or core does.
+TEST(ImageDecode, FocalLengthFromExifThroughOpenImageIO) {
+  test::ScratchDir dir;
+  const int w = 48, h = 32;
+  const fs::path path = dir / "tiled.tif";
+  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+  spec.tile_width = 16;
+  spec.tile_height = 16;
+  spec.attribute("Exif:FocalLength", 35.0f);
+  spec.attribute("Exif:FocalPlaneXResolution", 2.0f);  // per mm: a 24 mm sensor
+  spec.attribute("Exif:FocalPlaneResolutionUnit", 4);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec));
+  const std::vector<unsigned char> pixels(static_cast<std::size_t>(w * h * 3), 100);
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+  const ImageInfo info = probe_image(path);
+  EXPECT_NEAR(info.focal_px, 70.0, 1e-4) << info.focal_evidence;
+
+  // A strip TIFF (what raw converters write), read by core's own TIFF reader: the same, and
+  // its rows read after the EXIF directory was visited.
+  const fs::path strips = dir / "strips.tif";
+  spec.tile_width = spec.tile_height = 0;
+  spec.attribute("Exif:PixelXDimension", 2 * w);  // this copy is half the camera's width
+  out = OIIO::ImageOutput::create(strips.string());
+  ASSERT_TRUE(out && out->open(strips.string(), spec));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+  const ImageInfo strip_info = probe_image(strips);
+  EXPECT_NEAR(strip_info.focal_px, 35.0, 1e-4) << strip_info.focal_evidence;
+  const Image img = read_image(strips);
+  EXPECT_NEAR(img.at(w - 1, h - 1, 2), 100.0f / 255.0f, 1e-6f);
+}
+
 TEST(ImageDecode, JpegWrittenWithACameraRecordsItsFocalLength) {
   test::ScratchDir dir;
   ImageWriteOptions o;

@@ -68,6 +68,11 @@ void* open_file(const char* path, PtmkitOiioHeader* header, char* err, std::size
   header->channels = spec.nchannels;
   header->format = format;
   header->orientation = spec.get_int_attribute("Orientation", 1);
+  header->focal_mm = spec.get_float_attribute("Exif:FocalLength", 0.0f);
+  header->focal_plane_x_res = spec.get_float_attribute("Exif:FocalPlaneXResolution", 0.0f);
+  header->focal_plane_unit = spec.get_int_attribute("Exif:FocalPlaneResolutionUnit", 2);
+  header->pixel_x_dimension = spec.get_int_attribute("Exif:PixelXDimension", 0);
+  header->focal_35mm = spec.get_int_attribute("Exif:FocalLengthIn35mmFilm", 0);
   const std::string cs = lower(spec.get_string_attribute("oiio:ColorSpace"));
   const std::string fmt = in->format_name();
   header->colour = kOiioColourUnknown;

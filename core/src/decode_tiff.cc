@@ -2,6 +2,7 @@
 // interleaved samples, grey or RGB (alpha or extra samples kept as channels), 8- or 16-bit
 // unsigned integers or 32-bit floats, any compression libtiff decodes. Other layouts (tiles,
 // planar, palette, 1/4-bit, signed, 64-bit, YCbCr, CMYK) go to OpenImageIO.
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
 #include <string>
@@ -93,14 +94,42 @@ class TiffDecoder final : public Decoder {
       header_.colour_evidence = "ICC profile (taken as sRGB-like encoded)";
     }
     toff_t exif = 0;
-    if (!header_.has_colour_metadata && TIFFGetField(tif_, TIFFTAG_EXIFIFD, &exif) != 0 &&
-        exif != 0) {
-      std::uint16_t cs = 0;
-      if (TIFFReadEXIFDirectory(tif_, exif) != 0 &&
-          TIFFGetField(tif_, EXIFTAG_COLORSPACE, &cs) != 0 && cs == 1) {
-        header_.has_colour_metadata = true;
-        header_.colour_space = ColourSpace::kSRGB;
-        header_.colour_evidence = "EXIF ColorSpace sRGB";
+    if (TIFFGetField(tif_, TIFFTAG_EXIFIFD, &exif) != 0 && exif != 0) {
+      if (TIFFReadEXIFDirectory(tif_, exif) != 0) {
+        std::uint16_t cs = 0;
+        if (!header_.has_colour_metadata && TIFFGetField(tif_, EXIFTAG_COLORSPACE, &cs) != 0 &&
+            cs == 1) {
+          header_.has_colour_metadata = true;
+          header_.colour_space = ColourSpace::kSRGB;
+          header_.colour_evidence = "EXIF ColorSpace sRGB";
+        }
+        // Rationals come back as float or double, as libtiff stores the field.
+        const auto real = [&](ttag_t tag) -> double {
+          const TIFFField* field = TIFFFieldWithTag(tif_, tag);
+          if (field == nullptr) return 0.0;
+          if (TIFFFieldSetGetSize(field) == 8) {
+            double v = 0.0;
+            return TIFFGetField(tif_, tag, &v) != 0 && std::isfinite(v) ? v : 0.0;
+          }
+          float v = 0.0f;
+          return TIFFGetField(tif_, tag, &v) != 0 && std::isfinite(v) ? v : 0.0;
+        };
+        ExifFacts facts;
+        facts.focal_mm = real(EXIFTAG_FOCALLENGTH);
+        facts.focal_plane_x_res = real(EXIFTAG_FOCALPLANEXRESOLUTION);
+        std::uint16_t unit = 2, equivalent = 0;
+        std::uint32_t recorded = 0;
+        if (TIFFGetField(tif_, EXIFTAG_FOCALPLANERESOLUTIONUNIT, &unit) != 0) {
+          facts.focal_plane_unit = unit;
+        }
+        if (TIFFGetField(tif_, EXIFTAG_PIXELXDIMENSION, &recorded) != 0) {
+          facts.pixel_x_dimension = recorded;
+        }
+        if (TIFFGetField(tif_, EXIFTAG_FOCALLENGTHIN35MMFILM, &equivalent) != 0) {
+          facts.focal_35mm = equivalent;
+        }
+        header_.focal_px =
+            exif_focal_px(facts, header_.width, header_.height, &header_.focal_evidence);
       }
       if (TIFFSetDirectory(tif_, 0) == 0) {
         throw Error(where(path_) + ": cannot return to the image after its EXIF data");

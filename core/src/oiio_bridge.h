@@ -10,7 +10,7 @@
 extern "C" {
 
 // Bumped whenever a signature or a struct below changes; core refuses a module of another.
-#define PTMKIT_OIIO_ABI 2
+#define PTMKIT_OIIO_ABI 3
 
 enum { kOiioU8 = 0, kOiioU16 = 1, kOiioF32 = 2 };
 enum { kOiioColourUnknown = 0, kOiioColourLinear = 1, kOiioColourSRGB = 2 };
@@ -23,6 +23,13 @@ struct PtmkitOiioHeader {
   int colour;       // kOiioColour*: what the file's metadata says
   int orientation;  // 1..8
   char format_name[32];
+  // The camera's EXIF (0 where absent): FocalLength (mm), FocalPlaneXResolution and its unit
+  // (2 inch, 3 cm, 4 mm, 5 micrometre), PixelXDimension, FocalLengthIn35mmFilm (mm).
+  double focal_mm;
+  double focal_plane_x_res;
+  int focal_plane_unit;
+  long pixel_x_dimension;
+  double focal_35mm;
 };
 
 struct PtmkitOiioApi {

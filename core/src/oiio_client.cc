@@ -127,6 +127,13 @@ std::unique_ptr<Decoder> open_oiio(const fs::path& path, const DecodeSettings& s
                   : h.format == kOiioU16 ? PixelFormat::kU16
                                          : PixelFormat::kF32;
   header.orientation = h.orientation >= 1 && h.orientation <= 8 ? h.orientation : 1;
+  ExifFacts exif;
+  exif.focal_mm = h.focal_mm;
+  exif.focal_plane_x_res = h.focal_plane_x_res;
+  exif.focal_plane_unit = h.focal_plane_unit;
+  exif.pixel_x_dimension = h.pixel_x_dimension;
+  exif.focal_35mm = h.focal_35mm;
+  header.focal_px = exif_focal_px(exif, h.width, h.height, &header.focal_evidence);
   header.codec = std::string("oiio:") + h.format_name;
   if (h.colour != kOiioColourUnknown) {
     header.has_colour_metadata = true;

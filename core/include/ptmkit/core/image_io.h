@@ -62,10 +62,11 @@ struct ImageInfo {
   // EXIF/TIFF orientation, 1..8 (1: stored as displayed). read_image() and the stack reader
   // apply it, so width and height here are as displayed (swapped for 5..8).
   int orientation = 1;
-  // The focal length in pixels the camera recorded in EXIF (JPEG and PNG files), for the
-  // stored width (the same in pixels whatever the orientation); 0 when the file does not say.
-  // From FocalLength and the sensor's pixel pitch (FocalPlaneXResolution) where both are there,
-  // else from the 35 mm equivalent over the frame's diagonal. focal_evidence says which.
+  // The focal length in pixels the camera recorded in EXIF (JPEG, PNG, TIFF, and the files
+  // OpenImageIO reads, camera RAW among them), for the stored width (the same in pixels
+  // whatever the orientation); 0 when the file does not say. From FocalLength and the sensor's
+  // pixel pitch (FocalPlaneXResolution) where both are there, else from the 35 mm equivalent
+  // over the frame's diagonal. focal_evidence says which.
   double focal_px = 0.0;
   std::string focal_evidence;
 };
