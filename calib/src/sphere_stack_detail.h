@@ -105,8 +105,11 @@ struct Evidence {
   std::vector<std::vector<std::uint16_t>> small;  // per image, block-max luma * 65535
   cv::Mat full_max, full_mean;                    // CV_32F, photo size
   cv::Mat small_max, small_median, small_mean;    // CV_32F, analysis size
-  cv::Mat reference;                              // CV_32F photo size, or empty
-  bool srgb = true;                               // the samples are sRGB-encoded (else linear)
+  // At scale > 1: the per-pixel median over the images of each image's block mean (analysis
+  // size; a block mean keeps an edge where it is, a block maximum moves it); else empty.
+  cv::Mat small_block_median;
+  cv::Mat reference;  // CV_32F photo size, or empty
+  bool srgb = true;   // the samples are sRGB-encoded (else linear)
   [[nodiscard]] float at(int i, int x, int y) const {
     return static_cast<float>(small[static_cast<std::size_t>(i)][static_cast<std::size_t>(y) * sw +
                                                                  static_cast<std::size_t>(x)]) /

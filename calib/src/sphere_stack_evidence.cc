@@ -24,6 +24,12 @@ Evidence gather(const Source& src, int max_side) {
   ev.full_max = cv::Mat(ev.h, ev.w, CV_32F, cv::Scalar(0.0f));
   ev.full_mean = cv::Mat(ev.h, ev.w, CV_32F, cv::Scalar(0.0f));
   const float inv_n = 1.0f / static_cast<float>(ev.n);
+  // Block sums of each image's luma (scale > 1): 65535 x luma, summed over the block.
+  std::vector<std::vector<std::uint32_t>> block_sum;
+  if (ev.scale > 1) {
+    block_sum.assign(static_cast<std::size_t>(ev.n),
+                     std::vector<std::uint32_t>(static_cast<std::size_t>(ev.sw) * ev.sh, 0));
+  }
   src.scan([&](const StackBand& band) {
     // The photo-size planes by rows (each pixel's sum over the images in their order), the
     // analysis copies by image (each its own array): no two threads write one value, and any
@@ -51,6 +57,15 @@ Evidence gather(const Source& src, int max_side) {
           std::uint16_t& sv = small[x / ev.scale];
           sv = std::max(sv, q);
         }
+        if (!block_sum.empty()) {
+          std::uint32_t* sum = block_sum[static_cast<std::size_t>(i)].data() +
+                               static_cast<std::size_t>(y / ev.scale) * ev.sw;
+          for (int x = 0; x < band.width; ++x) {
+            const float v = band_luma(band, i, r, x);
+            sum[x / ev.scale] +=
+                static_cast<std::uint32_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 65535));
+          }
+        }
       }
     });
   });
@@ -66,6 +81,25 @@ Evidence gather(const Source& src, int max_side) {
     }
   });
   cv::resize(ev.full_mean, ev.small_mean, cv::Size(ev.sw, ev.sh), 0, 0, cv::INTER_AREA);
+  if (!block_sum.empty()) {
+    ev.small_block_median = cv::Mat(ev.sh, ev.sw, CV_32F);
+    tbb::parallel_for(0, ev.sh, [&](int y) {
+      // Blocks on the last row and column may be cut by the frame.
+      const int bh = std::min(ev.scale, ev.h - y * ev.scale);
+      std::vector<float> v(static_cast<std::size_t>(ev.n));
+      for (int x = 0; x < ev.sw; ++x) {
+        const int bw = std::min(ev.scale, ev.w - x * ev.scale);
+        const float per = 1.0f / (65535.0f * static_cast<float>(bw * bh));
+        const std::size_t at = static_cast<std::size_t>(y) * ev.sw + static_cast<std::size_t>(x);
+        for (int i = 0; i < ev.n; ++i) {
+          v[static_cast<std::size_t>(i)] =
+              static_cast<float>(block_sum[static_cast<std::size_t>(i)][at]) * per;
+        }
+        std::nth_element(v.begin(), v.begin() + ev.n / 2, v.end());
+        ev.small_block_median.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 2)];
+      }
+    });
+  }
   return ev;
 }
 
