@@ -51,20 +51,16 @@ Evidence gather(const Source& src, int max_side) {
         const int y = band.y0 + r;
         std::uint16_t* small = ev.small[static_cast<std::size_t>(i)].data() +
                                static_cast<std::size_t>(y / ev.scale) * ev.sw;
+        std::uint32_t* sum = block_sum.empty() ? nullptr
+                                               : block_sum[static_cast<std::size_t>(i)].data() +
+                                                     static_cast<std::size_t>(y / ev.scale) * ev.sw;
         for (int x = 0; x < band.width; ++x) {
           const float v = band_luma(band, i, r, x);
-          const auto q = static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 65535));
+          // Rounded to nearest (v is clamped to 0..1, so adding a half truncates correctly).
+          const auto q = static_cast<std::uint16_t>(std::clamp(v, 0.0f, 1.0f) * 65535.0f + 0.5f);
           std::uint16_t& sv = small[x / ev.scale];
           sv = std::max(sv, q);
-        }
-        if (!block_sum.empty()) {
-          std::uint32_t* sum = block_sum[static_cast<std::size_t>(i)].data() +
-                               static_cast<std::size_t>(y / ev.scale) * ev.sw;
-          for (int x = 0; x < band.width; ++x) {
-            const float v = band_luma(band, i, r, x);
-            sum[x / ev.scale] +=
-                static_cast<std::uint32_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 65535));
-          }
+          if (sum != nullptr) sum[x / ev.scale] += q;
         }
       }
     });
