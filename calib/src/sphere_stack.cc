@@ -580,6 +580,20 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
   return out;
 }
 
+// The rim circle near `around` on a composite (contrast-stretched, of the logarithm if asked;
+// smoothed by a 1 px Gaussian): the consensus of the strongest edges on 360 rays, refitted to
+// the points against brighter surroundings where both kinds are present. `rim`: the share of
+// rays supporting it.
+Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around, double* rim) {
+  cv::Mat f = stretch(plane, CV_32F, logarithm);
+  cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
+  int inside = 0;
+  const auto e = ray_edges(f, around.centre_px, around.radius_px, &inside);
+  Circle r = consensus_circle(e, around, rim, kRimChoiceTolPx);
+  rim_against_brighter(f, &r);
+  return r;
+}
+
 struct Want {
   int image = 0;
   int sphere = 0;
@@ -638,13 +652,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       bool done = false;
       for (const bool logarithm : {false, true}) {
         for (const auto& [name, plane] : planes) {
-          cv::Mat f = stretch(*plane, CV_32F, logarithm);
-          cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
-          int inside = 0;
-          const auto e = ray_edges(f, c.centre_px, c.radius_px, &inside);
           double rim = 0.0;
-          Circle r = consensus_circle(e, c, &rim, kRimChoiceTolPx);
-          rim_against_brighter(f, &r);
+          const Circle r = rim_circle(*plane, logarithm, c, &rim);
           if (rim > best_rim &&
               (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
               std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {
@@ -670,13 +679,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         cs.centre_px = (c.centre_px - half) / sc;
         cs.radius_px = c.radius_px / sc;
         for (const bool logarithm : {false, true}) {
-          cv::Mat f = stretch(ev.small_block_median, CV_32F, logarithm);
-          cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
-          int inside = 0;
-          const auto e = ray_edges(f, cs.centre_px, cs.radius_px, &inside);
           double rim = 0.0;
-          Circle r = consensus_circle(e, cs, &rim, kRimChoiceTolPx);
-          rim_against_brighter(f, &r);
+          const Circle r = rim_circle(ev.small_block_median, logarithm, cs, &rim);
           if (rim < 0.3) continue;
           Circle median;
           median.centre_px = r.centre_px * sc + half;
