@@ -928,6 +928,27 @@ TEST(CalibSphereStack, GlassRimsAtPhotoSizeAreCheckedAgainstTheBlockMedian) {
   }
 }
 
+// The block median's circle replaces the photo-size one only where it is clearly better
+// supported: a large black sphere's limb fades into a dark room the same way in both, and the
+// photo-size circle keeps its resolution.
+TEST(CalibSphereStack, ALargeSphereAtPhotoSizeKeepsItsPhotoSizeRim) {
+  const PhotoImages p = render_photo("photo-large-sphere", "", 2);
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 1;
+  o.rig.detection.camera.focal_px = p.options.focal_px;
+  o.search.analysis_max_side_px = 320;
+  const StackCalibration r = calibrate_sphere_stack(p.images, p.names, o);
+  EXPECT_EQ(r.analysis_scale, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 1u);
+  const Circle& c = r.rig.spheres[0].sphere;
+  const synth::SphereOutline& t = p.truth.spheres[0].outline;
+  const double off = (c.centre_px - t.centre_px).norm();
+  const double rel = std::abs(c.radius_px - t.radius_px) / t.radius_px;
+  std::printf("large sphere at scale 2: centre off %.3f px, radius off %.2f%%\n", off, 100.0 * rel);
+  EXPECT_LE(off, kCentreTargetPx);
+  EXPECT_LE(rel, kRadiusTargetRel);
+}
+
 // Cameras record the focal length in EXIF; `ptmkit synth` writes it as they do. Without a
 // focal length given, `calibrate sphere` takes the photographs' (the perspective model: two
 // spheres off the optical axis see each light from directions a few degrees apart), says so,
