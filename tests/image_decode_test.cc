@@ -146,17 +146,70 @@ TEST(ImageDecode, ColourSpaceDefaultsFollowTheSampleTypeWithoutMetadata) {
   EXPECT_EQ(probe_image(dir / "l.png").colour_space, ColourSpace::kLinear);
 }
 
-// Inserts an EXIF APP1 segment with an orientation tag right after a JPEG's SOI.
-std::string with_orientation(const std::string& jpeg, int orientation) {
-  std::string tiff = {'M', 'M', 0, 42, 0, 0, 0, 8};  // big-endian TIFF header, IFD at 8
-  tiff += std::string{0, 1};                         // one entry
-  tiff += std::string{0x01, 0x12, 0, 3, 0, 0, 0, 1, 0, static_cast<char>(orientation), 0, 0};
-  tiff += std::string(4, '\0');  // no next IFD
+// One entry of a big-endian EXIF IFD: SHORT (type 3) and LONG (4) hold `a`; RATIONAL (5)
+// holds a / b, stored after the IFD. `count` other than 1 makes a malformed entry.
+struct ExifEntry {
+  unsigned tag = 0;
+  unsigned type = 3;
+  std::uint32_t a = 0;
+  std::uint32_t b = 1;
+  std::uint32_t count = 1;
+  bool bad_offset = false;  // a RATIONAL whose offset points past the block
+};
+
+// A big-endian EXIF block: IFD0 with the EXIF IFD pointer (and the orientation, when given),
+// then the EXIF IFD with `entries`.
+std::string exif_block(const std::vector<ExifEntry>& entries, unsigned orientation = 0) {
+  std::string b;
+  auto u16 = [&](unsigned v) {
+    b += static_cast<char>((v >> 8) & 0xFF);
+    b += static_cast<char>(v & 0xFF);
+  };
+  auto u32 = [&](std::uint32_t v) {
+    for (int k = 3; k >= 0; --k) b += static_cast<char>((v >> (8 * k)) & 0xFF);
+  };
+  b = {'M', 'M', 0, 42};
+  u32(8);
+  const std::uint32_t exif_ifd = orientation > 0 ? 38 : 26;
+  u16(orientation > 0 ? 2 : 1);
+  if (orientation > 0) u16(0x0112), u16(3), u32(1), u16(orientation), u16(0);
+  u16(0x8769), u16(4), u32(1), u32(exif_ifd);
+  u32(0);
+  u16(static_cast<unsigned>(entries.size()));
+  std::uint32_t values = exif_ifd + 2 + 12 * static_cast<std::uint32_t>(entries.size()) + 4;
+  std::string tail;
+  for (const ExifEntry& e : entries) {
+    u16(e.tag), u16(e.type), u32(e.count);
+    if (e.type == 3) {
+      u16(e.a), u16(0);
+    } else if (e.type == 4) {
+      u32(e.a);
+    } else {
+      u32(e.bad_offset ? 100000 : values);
+      const std::string save = b;
+      b.clear();
+      u32(e.a), u32(e.b);
+      tail += b;
+      b = save;
+      values += 8;
+    }
+  }
+  u32(0);
+  return b + tail;
+}
+
+// A JPEG's bytes with an EXIF APP1 segment holding `tiff` inserted after the SOI.
+std::string with_exif(const std::string& jpeg, const std::string& tiff) {
   const std::string payload = std::string("Exif\0\0", 6) + tiff;
   const std::size_t len = payload.size() + 2;
   std::string seg = {static_cast<char>(0xFF), static_cast<char>(0xE1), static_cast<char>(len >> 8),
                      static_cast<char>(len & 0xFF)};
   return jpeg.substr(0, 2) + seg + payload + jpeg.substr(2);
+}
+
+// A JPEG's bytes with an EXIF segment holding only an orientation.
+std::string with_orientation(const std::string& jpeg, int orientation) {
+  return with_exif(jpeg, exif_block({}, static_cast<unsigned>(orientation)));
 }
 
 TEST(ImageDecode, ExifOrientationIsAppliedAsViewersDo) {
@@ -552,67 +605,6 @@ TEST(FitInputCli, LightFileThatIsADeviceFailsFast) {
 }
 
 // ---- The focal length cameras record in EXIF ----
-
-// One entry of a big-endian EXIF IFD: SHORT (type 3) and LONG (4) hold `a`; RATIONAL (5)
-// holds a / b, stored after the IFD. `count` other than 1 makes a malformed entry.
-struct ExifEntry {
-  unsigned tag = 0;
-  unsigned type = 3;
-  std::uint32_t a = 0;
-  std::uint32_t b = 1;
-  std::uint32_t count = 1;
-  bool bad_offset = false;  // a RATIONAL whose offset points past the block
-};
-
-// A big-endian EXIF block: IFD0 with the EXIF IFD pointer (and the orientation, when given),
-// then the EXIF IFD with `entries`.
-std::string exif_block(const std::vector<ExifEntry>& entries, unsigned orientation = 0) {
-  std::string b;
-  auto u16 = [&](unsigned v) {
-    b += static_cast<char>((v >> 8) & 0xFF);
-    b += static_cast<char>(v & 0xFF);
-  };
-  auto u32 = [&](std::uint32_t v) {
-    for (int k = 3; k >= 0; --k) b += static_cast<char>((v >> (8 * k)) & 0xFF);
-  };
-  b = {'M', 'M', 0, 42};
-  u32(8);
-  const std::uint32_t exif_ifd = orientation > 0 ? 38 : 26;
-  u16(orientation > 0 ? 2 : 1);
-  if (orientation > 0) u16(0x0112), u16(3), u32(1), u16(orientation), u16(0);
-  u16(0x8769), u16(4), u32(1), u32(exif_ifd);
-  u32(0);
-  u16(static_cast<unsigned>(entries.size()));
-  std::uint32_t values = exif_ifd + 2 + 12 * static_cast<std::uint32_t>(entries.size()) + 4;
-  std::string tail;
-  for (const ExifEntry& e : entries) {
-    u16(e.tag), u16(e.type), u32(e.count);
-    if (e.type == 3) {
-      u16(e.a), u16(0);
-    } else if (e.type == 4) {
-      u32(e.a);
-    } else {
-      u32(e.bad_offset ? 100000 : values);
-      const std::string save = b;
-      b.clear();
-      u32(e.a), u32(e.b);
-      tail += b;
-      b = save;
-      values += 8;
-    }
-  }
-  u32(0);
-  return b + tail;
-}
-
-// A JPEG's bytes with an EXIF APP1 segment holding `tiff` inserted after the SOI.
-std::string with_exif(const std::string& jpeg, const std::string& tiff) {
-  const std::string payload = std::string("Exif\0\0", 6) + tiff;
-  const std::size_t len = payload.size() + 2;
-  std::string seg = {static_cast<char>(0xFF), static_cast<char>(0xE1), static_cast<char>(len >> 8),
-                     static_cast<char>(len & 0xFF)};
-  return jpeg.substr(0, 2) + seg + payload + jpeg.substr(2);
-}
 
 TEST(ImageDecode, FocalLengthInPixelsFromTheCamerasExif) {
   test::ScratchDir dir;

@@ -321,9 +321,6 @@ void rim_against_brighter(const cv::Mat& f, Circle* circle) {
   *circle = std::move(q);
 }
 
-// A sample in linear light: decoded where the samples are sRGB-encoded.
-double to_linear(double v, bool srgb) { return srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) : v; }
-
 // The light's brightness above the median, in linear light where the samples are sRGB-encoded:
 // light adds to what the sphere shows in linear light, so an encoded lift over a bright
 // background (a window mirrored beside the highlight) is compressed and a halo spanning it
@@ -385,6 +382,10 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     const int k = cv::connectedComponents(clipped, labels, 8, CV_32S);
     // Pixels clipped in the stack's median as well: a static reflection, not the light's.
     auto static_clip = [&](int x, int y) { return base.at<float>(y, x) >= 0.9 * top; };
+    // Bright in the median (at least half the clip): a reflection there (a window, a lamp) can
+    // be lifted to the clip by the light's glow, so such pixels are no evidence of the light's
+    // core or its edge.
+    auto bright_in_median = [&](int x, int y) { return base.at<float>(y, x) >= 0.5 * top; };
     // The light's clipped component is the thickest (a streak may be longer, never thicker):
     // the largest inscribed radius, then the larger area. Thickness counts the pixels that
     // are dark in the median (below half the clip): a static reflection clipped in every
@@ -393,7 +394,7 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     cv::Mat moving = clipped.clone();
     for (int y = 0; y < l.rows; ++y) {
       for (int x = 0; x < l.cols; ++x) {
-        if (base.at<float>(y, x) >= 0.5 * top) moving.at<std::uint8_t>(y, x) = 0;
+        if (bright_in_median(x, y)) moving.at<std::uint8_t>(y, x) = 0;
       }
     }
     cv::Mat cpad, cdist;
@@ -454,7 +455,7 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
       // the light's glow has lifted to the clip. Beside a static clipped reflection, only
       // one with an unclipped neighbour lit above the median (the light's halo) as well.
       auto light_edge = [&](int x, int y) {
-        if (base.at<float>(y, x) >= 0.5 * top) return false;
+        if (bright_in_median(x, y)) return false;
         if (!out.touches_static) return true;
         constexpr int kDx[4] = {1, -1, 0, 0}, kDy[4] = {0, 0, 1, -1};
         for (int d = 0; d < 4; ++d) {
@@ -678,18 +679,14 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       // 1600 x 900: 1.9 / 1.1 px to 0.02 / 0.03 px off).
       if (!ev.small_block_median.empty()) {
         const double sc = ev.scale;
-        const Eigen::Vector2d half = Eigen::Vector2d::Constant(0.5 * (sc - 1.0));
         Circle cs;
-        cs.centre_px = (c.centre_px - half) / sc;
+        cs.centre_px = (c.centre_px - Eigen::Vector2d::Constant(0.5 * (sc - 1.0))) / sc;
         cs.radius_px = c.radius_px / sc;
         for (const bool logarithm : {false, true}) {
           double rim = 0.0;
           const Circle r = rim_circle(ev.small_block_median, logarithm, cs, &rim);
           if (rim < 0.3) continue;
-          Circle median;
-          median.centre_px = r.centre_px * sc + half;
-          median.radius_px = r.radius_px * sc;
-          for (const Eigen::Vector2d& q : r.outline_px) median.outline_px.push_back(q * sc + half);
+          const Circle median = to_photo(r, ev.scale);
           const bool differ =
               (median.centre_px - best.centre_px).norm() > kBlockMedianAgreement * sc ||
               std::abs(median.radius_px - best.radius_px) > kBlockMedianAgreement * sc;

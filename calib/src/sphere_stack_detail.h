@@ -3,6 +3,7 @@
 // the spots that move from image to image, and the sphere candidates found from both.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -142,7 +143,16 @@ struct Spot {
 std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
                                double min_peak);
 
+// A sample in linear light: decoded where the samples are sRGB-encoded (clamped to 0..1).
+inline double to_linear(double v, bool srgb) {
+  return srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) : v;
+}
+
 // ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
+
+// An analysis-size circle (and its outline points) in photo pixels: analysis pixel k covers
+// photo pixels k s .. k s + s - 1.
+Circle to_photo(const Circle& small, int scale);
 
 // Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r of the
 // smoothed composite `f`; `inside` counts the rays that stay in the frame.

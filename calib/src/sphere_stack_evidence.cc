@@ -175,9 +175,7 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
       s.lift = std::max(s.lift, d);
       const double v = ev.at(i, x + x0, y + y0);
       const double m = ev.small_median.at<float>(y + y0, x + x0);
-      s.lift_linear = std::max(s.lift_linear, ev.srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) -
-                                                            srgb_to_linear(std::clamp(m, 0.0, 1.0))
-                                                      : v - m);
+      s.lift_linear = std::max(s.lift_linear, to_linear(v, ev.srgb) - to_linear(m, ev.srgb));
       s.peak = std::max(s.peak, static_cast<double>(ev.at(i, x + x0, y + y0)));
     }
   }
