@@ -940,6 +940,40 @@ TEST(CalibSphereStack, ALargeSphereAtPhotoSizeKeepsItsPhotoSizeRim) {
   check_circles_at_scale_2(render_photo("photo-large-sphere", "", 2), 1, "large sphere");
 }
 
+// A pinhole camera sees a sphere off its axis as an ellipse, stretched away from the image
+// centre (2% for photo-dome's spheres, 12 degrees off the axis): a circle chosen by the rim
+// points within a pixel of it followed one side (2.5-2.7 px off at 2560 x 1440). With the focal
+// length the outline is fitted as the tangent cone it is. At 1280 x 720 (scale 2), where the
+// circle was 0.26-0.29 px off and its radius 0.12-0.15% short:
+TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
+  PhotoImages p;
+  p.options = synth::photo_preset_options("photo-dome");
+  p.options.lights = "rings:15:4,40:4";
+  synth::resize_photo(1280, 720, &p.options);
+  const synth::PhotoRenderer renderer(p.options);
+  p.truth = renderer.truth();
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    p.images.push_back(renderer.render(static_cast<int>(i)));
+    p.names.emplace_back("dome" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = p.options.focal_px;
+  o.search.analysis_max_side_px = 640;
+  const StackCalibration r = calibrate_sphere_stack(p.images, p.names, o);
+  EXPECT_EQ(r.analysis_scale, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Circle& c = r.rig.spheres[k].sphere;
+    const synth::SphereOutline& t = p.truth.spheres[k].outline;
+    const double off = (c.centre_px - t.centre_px).norm();
+    std::printf("off-axis sphere %zu at 1280 x 720: centre off %.3f px, radius off %.2f%%\n", k,
+                off, 100.0 * (c.radius_px / t.radius_px - 1.0));
+    EXPECT_LE(off, 0.1) << k;
+    EXPECT_LE(std::abs(c.radius_px - t.radius_px) / t.radius_px, 0.001) << k;
+  }
+}
+
 // Cameras record the focal length in EXIF; `ptmkit synth` writes it as they do. Without a
 // focal length given, `calibrate sphere` takes the photographs' (the perspective model: two
 // spheres off the optical axis see each light from directions a few degrees apart), says so,

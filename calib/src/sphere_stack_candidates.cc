@@ -13,6 +13,69 @@ namespace ptmkit::calib::stack_detail {
 
 // ---- Candidates. ---------------------------------------------------------------------------
 
+OutlinePlane::OutlinePlane(const SphereCamera& camera, int width, int height, int points_scale)
+    : focal_px(camera.focal_px > 0.0 ? camera.focal_px : 0.0),
+      principal_px(principal_point(camera, width, height)),
+      scale(points_scale) {}
+
+Eigen::Vector2d OutlinePlane::to(const Eigen::Vector2d& p) const {
+  if (identity()) return p;
+  const Eigen::Vector2d half = Eigen::Vector2d::Constant(0.5 * (scale - 1));
+  const Eigen::Vector3d d =
+      Eigen::Vector3d((scale * p.x() + half.x() - principal_px.x()) / focal_px,
+                      (scale * p.y() + half.y() - principal_px.y()) / focal_px, 1.0)
+          .normalized();
+  const Eigen::Vector2d q = principal_px + 2.0 * focal_px * d.head<2>() / (1.0 + d.z());
+  return (q - half) / scale;
+}
+
+Eigen::Vector2d OutlinePlane::from(const Eigen::Vector2d& q) const {
+  if (identity()) return q;
+  const Eigen::Vector2d half = Eigen::Vector2d::Constant(0.5 * (scale - 1));
+  const Eigen::Vector2d u = (scale * q + half - principal_px) / (2.0 * focal_px);
+  const double rho2 = u.squaredNorm();
+  // The ray (2 u, 1 - rho^2) / (1 + rho^2); the image plane at z = 1.
+  const double z = std::max(1e-9, 1.0 - rho2);
+  const Eigen::Vector2d p = principal_px + focal_px * 2.0 * u / z;
+  return (p - half) / scale;
+}
+
+Circle OutlinePlane::to(const Circle& c) const {
+  if (identity()) return c;
+  Circle q;
+  q.centre_px = to(c.centre_px);
+  double sum = 0.0;
+  for (int k = 0; k < 8; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / 8.0;
+    sum += (to(c.centre_px + c.radius_px * Eigen::Vector2d(std::cos(a), std::sin(a))) - q.centre_px)
+               .norm();
+  }
+  q.radius_px = sum / 8.0;
+  for (const Eigen::Vector2d& p : c.outline_px) q.outline_px.push_back(to(p));
+  return q;
+}
+
+Circle OutlinePlane::from(const Circle& q) const {
+  if (identity()) return q;
+  std::vector<cv::Point2f> ring;
+  for (int k = 0; k < 72; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / 72.0;
+    const Eigen::Vector2d p =
+        from(q.centre_px + q.radius_px * Eigen::Vector2d(std::cos(a), std::sin(a)));
+    ring.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
+  }
+  Circle c;
+  // Centred on the ring's mean for float precision.
+  cv::Point2f mean(0.f, 0.f);
+  for (const cv::Point2f& p : ring) mean += p * (1.0f / 72.0f);
+  for (cv::Point2f& p : ring) p -= mean;
+  const cv::RotatedRect e = cv::fitEllipse(ring);
+  c.centre_px = {mean.x + e.center.x, mean.y + e.center.y};
+  c.radius_px = 0.5 * std::sqrt(static_cast<double>(e.size.width) * e.size.height);
+  for (const Eigen::Vector2d& p : q.outline_px) c.outline_px.push_back(from(p));
+  return c;
+}
+
 // Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r: the
 // largest radial derivative of the smoothed composite, at least 2 grey levels a pixel, to a
 // sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the others.

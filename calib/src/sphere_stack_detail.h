@@ -150,6 +150,31 @@ inline double to_linear(double v, bool srgb) {
 
 // ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
 
+// Where circles are fitted to a sphere's outline. A pinhole camera sees the outline as the cone
+// of rays tangent to the sphere: an ellipse, stretched away from the principal point by about
+// 1 / cos of the centre's angle off the axis (2% at 12 degrees: 3.4 px on a sphere of radius
+// 170, and a circle fitted by consensus then follows one side). The stereographic projection of
+// the rays maps every such cone to a circle: with a focal length, points are fitted there. The
+// plane is scaled to the points' pixels at the principal point (2 f tan(angle / 2) from it);
+// without a focal length it is the identity.
+struct OutlinePlane {
+  double focal_px = 0.0;                                   // photo pixels; 0: identity
+  Eigen::Vector2d principal_px = Eigen::Vector2d::Zero();  // photo pixels
+  int scale = 1;  // the points' pixels: photo pixel = scale p + (scale - 1) / 2
+
+  OutlinePlane() = default;
+  OutlinePlane(const SphereCamera& camera, int width, int height, int points_scale);
+  [[nodiscard]] bool identity() const { return !(focal_px > 0.0); }
+  [[nodiscard]] Eigen::Vector2d to(const Eigen::Vector2d& p) const;
+  [[nodiscard]] Eigen::Vector2d from(const Eigen::Vector2d& q) const;
+  // A circle in the points' pixels (an outline's centre and mean radius) to the plane, near
+  // enough to start a fit from.
+  [[nodiscard]] Circle to(const Circle& c) const;
+  // A circle fitted in the plane back to the points' pixels: the outline ellipse's centre and
+  // the geometric mean of its semi-axes; its outline points mapped back.
+  [[nodiscard]] Circle from(const Circle& q) const;
+};
+
 // An analysis-size circle (and its outline points) in photo pixels: analysis pixel k covers
 // photo pixels k s .. k s + s - 1.
 Circle to_photo(const Circle& small, int scale);
