@@ -974,6 +974,35 @@ TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
   }
 }
 
+// A large sphere's rim profiles are sampled every pixel at most: at r / 200 (3.6 px on a sphere
+// of radius 720 px, at 2560 x 1440) a parabola through samples further apart than the blurred
+// edge is wide misplaced the rim, and the circle was 1.0 px off here (0.5-1.0 px on JPEG
+// captures of 12 lights).
+TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOfAPixel) {
+  PhotoImages p;
+  p.options = synth::photo_preset_options("photo-large-sphere");
+  p.options.lights = "rings:30:3,60:3";
+  p.options.seed = 2;
+  synth::resize_photo(2560, 1440, &p.options);
+  const synth::PhotoRenderer renderer(p.options);
+  p.truth = renderer.truth();
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    p.images.push_back(renderer.render(static_cast<int>(i)));
+    p.names.emplace_back("large" + std::to_string(i) + ".jpg");
+  }
+  StackCalibrationOptions o;
+  o.rig.detection.camera.focal_px = p.options.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(p.images, p.names, o);
+  ASSERT_EQ(r.rig.spheres.size(), 1u);
+  const Circle& c = r.rig.spheres[0].sphere;
+  const synth::SphereOutline& t = p.truth.spheres[0].outline;
+  const double off = (c.centre_px - t.centre_px).norm();
+  std::printf("large sphere at 2560 x 1440: centre off %.3f px, radius off %.3f%%\n", off,
+              100.0 * (c.radius_px / t.radius_px - 1.0));
+  EXPECT_LE(off, 0.35);
+  EXPECT_LE(std::abs(c.radius_px - t.radius_px) / t.radius_px, 0.001);
+}
+
 // Cameras record the focal length in EXIF; `ptmkit synth` writes it as they do. Without a
 // focal length given, `calibrate sphere` takes the photographs' (the perspective model: two
 // spheres off the optical axis see each light from directions a few degrees apart), says so,
