@@ -5,11 +5,14 @@
 // render's truth: each circle's centre and radius, each highlight against the mirror
 // highlight of its light, and each combined light direction.
 //
-//   photo_calibration WORK_DIR [PRESET[:SEED,SEED...] ...]
+//   photo_calibration WORK_DIR [--size WxH] [PRESET[:SEED,SEED...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
+//       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
+//       `ptmkit synth --width W --height H` does); default the presets' 640 x 360
 //
 // Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -31,9 +34,10 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
          std::numbers::pi;
 }
 
-void run(const fs::path& work, const std::string& preset, unsigned seed) {
+void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
+  if (width > 0) synth::resize_photo(width, height, &po);
   const fs::path dir = work / (preset + "-" + std::to_string(seed));
   fs::remove_all(dir);
   const synth::PhotoReport rendered = synth::render_photo_capture(po, dir);
@@ -48,7 +52,10 @@ void run(const fs::path& work, const std::string& preset, unsigned seed) {
       photos.push_back(f);
     }
   }
+  const auto t0 = std::chrono::steady_clock::now();
   const calib::StackCalibration r = calib::calibrate_sphere_stack(photos, o);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   std::printf("%s seed %u:", preset.c_str(), seed);
   for (std::size_t k = 0; k < r.rig.spheres.size() && k < truth.spheres.size(); ++k) {
@@ -79,8 +86,8 @@ void run(const fs::path& work, const std::string& preset, unsigned seed) {
     max = std::max(max, a);
     ++used;
   }
-  std::printf(" lights %d of %zu, mean %.3f max %.3f deg\n", used, truth.light_dirs.size(),
-              used ? mean / used : 0.0, max);
+  std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used,
+              truth.light_dirs.size(), used ? mean / used : 0.0, max, seconds);
   std::fflush(stdout);
 }
 
@@ -89,11 +96,21 @@ void run(const fs::path& work, const std::string& preset, unsigned seed) {
 int main(int argc, char** argv) {
   try {
     if (argc < 2) {
-      std::fprintf(stderr, "usage: photo_calibration WORK_DIR [PRESET[:SEED,...] ...]\n");
+      std::fprintf(stderr,
+                   "usage: photo_calibration WORK_DIR [--size WxH] [PRESET[:SEED,...] ...]\n");
       return 2;
     }
     const fs::path work = argv[1];
     std::vector<std::string> specs(argv + 2, argv + argc);
+    int width = 0, height = 0;
+    if (!specs.empty() && specs[0] == "--size") {
+      if (specs.size() < 2 || std::sscanf(specs[1].c_str(), "%dx%d", &width, &height) != 2 ||
+          width < 32 || height < 32) {
+        std::fprintf(stderr, "photo_calibration: --size needs WxH, e.g. 2560x1440\n");
+        return 2;
+      }
+      specs.erase(specs.begin(), specs.begin() + 2);
+    }
     if (specs.empty()) {
       specs = {"photo-dome:1,2,3", "photo-glass:1,2,3", "photo-chrome:1,2,3",
                "photo-large-sphere:1,2,3"};
@@ -116,7 +133,7 @@ int main(int argc, char** argv) {
       }
       for (const unsigned s : seeds) {
         try {
-          run(work, preset, s);
+          run(work, preset, s, width, height);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }

@@ -976,12 +976,12 @@ TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
 
 // A large sphere's rim profiles are sampled every pixel at most: at r / 200 (3.6 px on a sphere
 // of radius 720 px, at 2560 x 1440) a parabola through samples further apart than the blurred
-// edge is wide misplaced the rim, and the circle was 1.0 px off here (0.5-1.0 px on JPEG
+// edge is wide misplaced the rim, and the circle was 1.1 px off here (0.5-1.0 px on JPEG
 // captures of 12 lights).
 TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOfAPixel) {
   PhotoImages p;
   p.options = synth::photo_preset_options("photo-large-sphere");
-  p.options.lights = "rings:30:3,60:3";
+  p.options.lights = "rings:45:3";
   p.options.seed = 2;
   synth::resize_photo(2560, 1440, &p.options);
   const synth::PhotoRenderer renderer(p.options);
