@@ -86,8 +86,8 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
     max = std::max(max, a);
     ++used;
   }
-  std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used,
-              truth.light_dirs.size(), used ? mean / used : 0.0, max, seconds);
+  std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used, truth.light_dirs.size(),
+              used ? mean / used : 0.0, max, seconds);
   std::fflush(stdout);
 }
 
