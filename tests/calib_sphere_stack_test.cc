@@ -418,13 +418,16 @@ struct PhotoImages {
   std::vector<fs::path> names;
 };
 constexpr const char* kEightLights = "rings:15:3,40:3,65:2";
+// `width` > 0: rendered at width x height (the scene kept, the focal length scaled).
 PhotoImages render_photo(const std::string& preset, const std::string& lights,
-                         std::uint64_t seed = 1, std::size_t spheres = 0) {
+                         std::uint64_t seed = 1, std::size_t spheres = 0, int width = 0,
+                         int height = 0) {
   PhotoImages p;
   p.options = synth::photo_preset_options(preset);
   if (!lights.empty()) p.options.lights = lights;
   p.options.seed = seed;
   if (spheres > 0) p.options.spheres.resize(spheres);
+  if (width > 0) synth::resize_photo(width, height, &p.options);
   const synth::PhotoRenderer renderer(p.options);
   p.truth = renderer.truth();
   for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
@@ -946,16 +949,7 @@ TEST(CalibSphereStack, ALargeSphereAtPhotoSizeKeepsItsPhotoSizeRim) {
 // length the outline is fitted as the tangent cone it is. At 1280 x 720 (scale 2), where the
 // circle was 0.26-0.29 px off and its radius 0.12-0.15% short:
 TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
-  PhotoImages p;
-  p.options = synth::photo_preset_options("photo-dome");
-  p.options.lights = "rings:15:4,40:4";
-  synth::resize_photo(1280, 720, &p.options);
-  const synth::PhotoRenderer renderer(p.options);
-  p.truth = renderer.truth();
-  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-    p.images.push_back(renderer.render(static_cast<int>(i)));
-    p.names.emplace_back("dome" + std::to_string(i) + ".jpg");
-  }
+  const PhotoImages p = render_photo("photo-dome", "rings:15:4,40:4", 1, 0, 1280, 720);
   StackCalibrationOptions o;
   o.rig.sphere_count = 2;
   o.rig.detection.camera.focal_px = p.options.focal_px;
@@ -979,17 +973,7 @@ TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
 // edge is wide misplaced the rim, and the circle was 1.1 px off here (0.5-1.0 px on JPEG
 // captures of 12 lights).
 TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOfAPixel) {
-  PhotoImages p;
-  p.options = synth::photo_preset_options("photo-large-sphere");
-  p.options.lights = "rings:45:3";
-  p.options.seed = 2;
-  synth::resize_photo(2560, 1440, &p.options);
-  const synth::PhotoRenderer renderer(p.options);
-  p.truth = renderer.truth();
-  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-    p.images.push_back(renderer.render(static_cast<int>(i)));
-    p.names.emplace_back("large" + std::to_string(i) + ".jpg");
-  }
+  const PhotoImages p = render_photo("photo-large-sphere", "rings:45:3", 2, 0, 2560, 1440);
   StackCalibrationOptions o;
   o.rig.detection.camera.focal_px = p.options.focal_px;
   const StackCalibration r = calibrate_sphere_stack(p.images, p.names, o);
