@@ -199,9 +199,8 @@ void add_synth_command(CLI::App& root) {
       cmd->add_flag("--no-exif")
           ->description(
               "Photo presets: no EXIF camera block in the JPEG files (by default they record the "
-              "focal length as a camera does: FocalLength on a 23.5 mm wide sensor, its pixel "
-              "pitch, "
-              "the 35 mm equivalent)");
+              "focal length as a camera does: FocalLength on a 23.5 mm wide sensor, its "
+              "pixel pitch, the 35 mm equivalent)");
   p.supersample = cmd->add_option("--supersample", flags->supersample,
                                   "Photo presets: sub-samples per pixel side on edges and "
                                   "highlights, 1..16 (default 4)");

@@ -589,9 +589,8 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
 
 // The rim circle near `around` on a composite (contrast-stretched, of the logarithm if asked;
 // smoothed by a 1 px Gaussian): the consensus of the strongest edges on 360 rays, refitted to
-// the points against brighter surroundings where both kinds are present. `rim`: the share of
-// rays supporting it.
-// Circles are fitted in `op` (the outline's perspective: OutlinePlane).
+// the points against brighter surroundings where both kinds are present; circles are fitted
+// in `op` (the outline under the camera: OutlinePlane). `rim`: the share of rays supporting it.
 Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
                   const OutlinePlane& op, double* rim) {
   cv::Mat f = stretch(plane, CV_32F, logarithm);
@@ -684,10 +683,9 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       // the block means too, at the analysis size, and taken where clearly more rays support
       // it (kBlockMedianRimMargin; glass at 1600 x 900: 0.4 to 0.02-0.03 px off).
       if (!ev.small_block_median.empty()) {
-        const double sc = ev.scale;
         Circle cs;
-        cs.centre_px = (c.centre_px - Eigen::Vector2d::Constant(0.5 * (sc - 1.0))) / sc;
-        cs.radius_px = c.radius_px / sc;
+        cs.centre_px = small_px(c.centre_px, ev.scale);
+        cs.radius_px = c.radius_px / ev.scale;
         for (const bool logarithm : {false, true}) {
           double rim = 0.0;
           const Circle r = rim_circle(ev.small_block_median, logarithm, cs, small_plane, &rim);
@@ -718,7 +716,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     reports[k].sphere = c;
     reports[k].sphere_detected = detected;
     reports[k].lights.resize(static_cast<std::size_t>(ev.n));
-    const Eigen::Vector2d cs = (c.centre_px - Eigen::Vector2d::Constant(0.5 * (s - 1))) / s;
+    const Eigen::Vector2d cs = small_px(c.centre_px, s);
     const double rs = det.search_radius_fraction * c.radius_px / s;
     for (int i = 0; i < ev.n; ++i) {
       reports[k].lights[static_cast<std::size_t>(i)].image = names[static_cast<std::size_t>(i)];
@@ -778,8 +776,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       std::vector<std::array<Eigen::Vector3d, 2>> dir(k_spheres);
       for (std::size_t k = 0; k < k_spheres; ++k) {
         for (int r = 0; r < choices[k]; ++r) {
-          const Eigen::Vector2d px = spots_of[k][ii][static_cast<std::size_t>(r)].centre_small * s +
-                                     Eigen::Vector2d::Constant(0.5 * (s - 1));
+          const Eigen::Vector2d px =
+              photo_px(spots_of[k][ii][static_cast<std::size_t>(r)].centre_small, s);
           dir[k][static_cast<std::size_t>(r)] =
               reflect_highlight(circles[k], det.camera, px, ev.w, ev.h);
         }
@@ -846,8 +844,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       const auto ii = static_cast<std::size_t>(i);
       if (!two_spots(k, ii)) continue;
       two = true;
-      const Eigen::Vector2d c =
-          (circles[k].centre_px - Eigen::Vector2d::Constant(0.5 * (s - 1))) / s;
+      const Eigen::Vector2d c = small_px(circles[k].centre_px, s);
       const Eigen::Vector2d a = spots_of[k][ii][0].centre_small - c;
       const Eigen::Vector2d b = spots_of[k][ii][1].centre_small - c;
       if (a.dot(b) < 0.0) opposite = true;

@@ -20,24 +20,17 @@ OutlinePlane::OutlinePlane(const SphereCamera& camera, int width, int height, in
 
 Eigen::Vector2d OutlinePlane::to(const Eigen::Vector2d& p) const {
   if (identity()) return p;
-  const Eigen::Vector2d half = Eigen::Vector2d::Constant(0.5 * (scale - 1));
-  const Eigen::Vector3d d =
-      Eigen::Vector3d((scale * p.x() + half.x() - principal_px.x()) / focal_px,
-                      (scale * p.y() + half.y() - principal_px.y()) / focal_px, 1.0)
-          .normalized();
-  const Eigen::Vector2d q = principal_px + 2.0 * focal_px * d.head<2>() / (1.0 + d.z());
-  return (q - half) / scale;
+  const Eigen::Vector2d v = (photo_px(p, scale) - principal_px) / focal_px;
+  const Eigen::Vector3d d = Eigen::Vector3d(v.x(), v.y(), 1.0).normalized();
+  return small_px(principal_px + 2.0 * focal_px * d.head<2>() / (1.0 + d.z()), scale);
 }
 
 Eigen::Vector2d OutlinePlane::from(const Eigen::Vector2d& q) const {
   if (identity()) return q;
-  const Eigen::Vector2d half = Eigen::Vector2d::Constant(0.5 * (scale - 1));
-  const Eigen::Vector2d u = (scale * q + half - principal_px) / (2.0 * focal_px);
-  const double rho2 = u.squaredNorm();
-  // The ray (2 u, 1 - rho^2) / (1 + rho^2); the image plane at z = 1.
-  const double z = std::max(1e-9, 1.0 - rho2);
-  const Eigen::Vector2d p = principal_px + focal_px * 2.0 * u / z;
-  return (p - half) / scale;
+  const Eigen::Vector2d u = (photo_px(q, scale) - principal_px) / (2.0 * focal_px);
+  // The ray (2 u, 1 - |u|^2) / (1 + |u|^2); the image plane at z = 1.
+  const double z = std::max(1e-9, 1.0 - u.squaredNorm());
+  return small_px(principal_px + focal_px * 2.0 * u / z, scale);
 }
 
 Circle OutlinePlane::to(const Circle& c) const {
@@ -51,7 +44,6 @@ Circle OutlinePlane::to(const Circle& c) const {
                .norm();
   }
   q.radius_px = sum / 8.0;
-  for (const Eigen::Vector2d& p : c.outline_px) q.outline_px.push_back(to(p));
   return q;
 }
 
@@ -303,13 +295,9 @@ std::string describe(const SphereCandidate& c) {
 
 Circle to_photo(const Circle& small, int scale) {
   Circle c;
-  const double s = scale;
-  // Analysis pixel k covers photo pixels k*s .. k*s+s-1: its centre is at k*s + (s-1)/2.
-  c.centre_px = small.centre_px * s + Eigen::Vector2d::Constant(0.5 * (s - 1));
-  c.radius_px = small.radius_px * s;
-  for (const auto& p : small.outline_px) {
-    c.outline_px.push_back(p * s + Eigen::Vector2d::Constant(0.5 * (s - 1)));
-  }
+  c.centre_px = photo_px(small.centre_px, scale);
+  c.radius_px = small.radius_px * scale;
+  for (const auto& p : small.outline_px) c.outline_px.push_back(photo_px(p, scale));
   return c;
 }
 
@@ -424,7 +412,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
   for (SphereCandidate& c : sorted) {
     c.circle = to_photo(c.circle, ev.scale);
     for (auto& p : c.spots_px) {
-      if (p) *p = *p * ev.scale + Eigen::Vector2d::Constant(0.5 * (ev.scale - 1));
+      if (p) *p = photo_px(*p, ev.scale);
     }
   }
   auto overlap = [](const SphereCandidate& a, const SphereCandidate& b) {

@@ -168,15 +168,22 @@ struct OutlinePlane {
   [[nodiscard]] Eigen::Vector2d to(const Eigen::Vector2d& p) const;
   [[nodiscard]] Eigen::Vector2d from(const Eigen::Vector2d& q) const;
   // A circle in the points' pixels (an outline's centre and mean radius) to the plane, near
-  // enough to start a fit from.
+  // enough to start a fit from (its outline points are not mapped).
   [[nodiscard]] Circle to(const Circle& c) const;
   // A circle fitted in the plane back to the points' pixels: the outline ellipse's centre and
   // the geometric mean of its semi-axes; its outline points mapped back.
   [[nodiscard]] Circle from(const Circle& q) const;
 };
 
-// An analysis-size circle (and its outline points) in photo pixels: analysis pixel k covers
-// photo pixels k s .. k s + s - 1.
+// Analysis pixel k covers photo pixels k s .. k s + s - 1: its centre is photo pixel
+// k s + (s - 1) / 2. A point from the analysis size to photo pixels, and back.
+inline Eigen::Vector2d photo_px(const Eigen::Vector2d& small, double scale) {
+  return small * scale + Eigen::Vector2d::Constant(0.5 * (scale - 1));
+}
+inline Eigen::Vector2d small_px(const Eigen::Vector2d& photo, double scale) {
+  return (photo - Eigen::Vector2d::Constant(0.5 * (scale - 1))) / scale;
+}
+// An analysis-size circle (and its outline points) in photo pixels.
 Circle to_photo(const Circle& small, int scale);
 
 // Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r of the
