@@ -72,6 +72,11 @@ void RawFile::write_at(const void* data, std::size_t bytes, std::size_t offset,
   }
 }
 
+void RawFile::start_writeback(std::size_t offset, std::size_t bytes) const {
+  (void)::sync_file_range(fd_, static_cast<off_t>(offset), static_cast<off_t>(bytes),
+                          SYNC_FILE_RANGE_WRITE);
+}
+
 void RawFile::read_at(void* data, std::size_t bytes, std::size_t offset,
                       const std::filesystem::path& what) const {
   auto* p = static_cast<char*>(data);

@@ -369,10 +369,12 @@ void PtmStreamWriter::end() {
         const std::size_t at =
             data0 + (static_cast<std::size_t>(p) * file_texels + j * w) * kPtmTerms;
         file.write_at(buf.bytes.data() + p * plane_bytes, plane_bytes, at, path_);
+        file.start_writeback(at, plane_bytes);
       }
       if (s.format == PtmFormat::kLRGB) {
-        file.write_at(buf.rgb.data(), buf.rgb.size(), data0 + file_texels * kPtmTerms + j * w * 3,
-                      path_);
+        const std::size_t at = data0 + file_texels * kPtmTerms + j * w * 3;
+        file.write_at(buf.rgb.data(), buf.rgb.size(), at, path_);
+        file.start_writeback(at, buf.rgb.size());
       }
     };
     tbb::parallel_pipeline(

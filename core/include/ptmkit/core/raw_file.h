@@ -50,6 +50,9 @@ class RawFile {
   // Frees the whole pages of bytes [offset, offset + bytes) that are no longer needed. Only an
   // economy: a file system without hole punching keeps them until the file is closed.
   void punch_hole(std::size_t offset, std::size_t bytes) const;
+  // Starts writing bytes [offset, offset + bytes) back to the disk without waiting, so that
+  // the flush before a commit finds little left to do. Only an economy: nothing is reported.
+  void start_writeback(std::size_t offset, std::size_t bytes) const;
   // Closes, reporting a failed close (a write the kernel could not finish) as ptmkit::Error
   // naming `what`.
   void close(const std::filesystem::path& what);
