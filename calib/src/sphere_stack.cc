@@ -11,6 +11,7 @@
 #include <optional>
 
 #include <tbb/parallel_for.h>
+#include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -45,6 +46,9 @@ struct Located {
   // The clipped region reaches pixels clipped in the stack's median too: a static
   // reflection (a window, a lamp) clipped in every image, merged with the light's core.
   bool touches_static = false;
+  // On glass: the spot is many times the sphere's usual core (kGlareCoreRatio), the glow of
+  // the refracted hot spot rather than the light's reflection.
+  double glare_ratio = 0.0;
 };
 
 void shape(const std::vector<Eigen::Vector3d>& samples, Located* out) {
@@ -70,13 +74,93 @@ void shape(const std::vector<Eigen::Vector3d>& samples, Located* out) {
   out->ok = true;
 }
 
+// A highlight's halo is taken to ride on a ramp (a linear background) where allowing for one
+// leaves at most this share of the asymmetry (mean squared residual) of the plain symmetric
+// fit. On the photographic renders, the reflections on glass that the glare of the hot spot
+// moves by a pixel or more (lights 75-84 degrees up) leave 0.01-0.03 of it; of the other
+// highlights, none that the slope would move by more than 0.1 px leaves under 0.15.
+constexpr double kRampAsymmetryShare = 0.1;
+
+// Point symmetry of a highlight's halo about c, up to a background of slope g: the residual
+// of pixel p is L(p) - L(2c - p) - 2 g.(p - c), which vanishes for a halo symmetric about c on
+// a linear background g.x + k.
+struct Symmetry {
+  Eigen::Vector2d centre;
+  Eigen::Vector2d slope = Eigen::Vector2d::Zero();
+  double sum_sq = 0.0;  // of the residuals at the pixels used
+  int used = 0;
+  bool ok = false;
+};
+
+// Gauss-Newton on the residuals above over `pts`, for the centre alone or (with_slope) the
+// centre and the slope; the centre moves at most half a pixel a step (the linearisation
+// holds that far) and at most `max_shift` from `start` (else not ok).
+Symmetry fit_symmetry(const cv::Mat& lift, const std::vector<Eigen::Vector2d>& pts,
+                      const Eigen::Vector2d& start, double max_shift, bool with_slope,
+                      const std::function<bool(int, int)>& inside_win) {
+  const int n = with_slope ? 4 : 2;
+  Symmetry s;
+  s.centre = start;
+  for (int it = 0; it <= 20; ++it) {
+    Eigen::Matrix4d jtj = Eigen::Matrix4d::Zero();
+    Eigen::Vector4d jtr = Eigen::Vector4d::Zero();
+    double sum_sq = 0.0;
+    int used = 0;
+    for (const Eigen::Vector2d& p : pts) {
+      const Eigen::Vector2d q = 2.0 * s.centre - p;
+      if (!inside_win(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())))) {
+        continue;
+      }
+      double vp = 0, vq = 0, xm = 0, xp = 0, ym = 0, yp = 0;
+      if (!bilinear_at(lift, p.x(), p.y(), &vp) || !bilinear_at(lift, q.x(), q.y(), &vq) ||
+          !bilinear_at(lift, q.x() - 0.5, q.y(), &xm) ||
+          !bilinear_at(lift, q.x() + 0.5, q.y(), &xp) ||
+          !bilinear_at(lift, q.x(), q.y() - 0.5, &ym) ||
+          !bilinear_at(lift, q.x(), q.y() + 0.5, &yp)) {
+        continue;
+      }
+      Eigen::Vector4d j;
+      j.head<2>() = -2.0 * Eigen::Vector2d(xp - xm, yp - ym) + 2.0 * s.slope;  // d r / d c
+      j.tail<2>() = -2.0 * (p - s.centre);                                     // d r / d g
+      const double res = vp - vq - 2.0 * s.slope.dot(p - s.centre);
+      jtj += j * j.transpose();
+      jtr += j * res;
+      sum_sq += res * res;
+      ++used;
+    }
+    s.sum_sq = sum_sq;
+    s.used = used;
+    if (used < 12) return s;
+    if (it == 20) break;
+    const Eigen::MatrixXd a = jtj.topLeftCorner(n, n);
+    const Eigen::FullPivLU<Eigen::MatrixXd> lu(a);
+    if (lu.rank() < n || std::abs(a.determinant()) < 1e-12) return s;  // flat: no slope
+    Eigen::Vector4d step = Eigen::Vector4d::Zero();
+    step.head(n) = -lu.solve(jtr.head(n));
+    s.centre += step.head<2>().cwiseMax(-0.5).cwiseMin(0.5);
+    s.slope += step.tail<2>();
+    if ((s.centre - start).norm() > max_shift) return s;
+    if (step.head<2>().norm() < 1e-4) {
+      it = 19;  // one more pass for the residuals at the final centre
+    }
+  }
+  s.ok = true;
+  return s;
+}
+
 // The centre about which the highlight's brightness (above the stack's median) is most nearly
-// point-symmetric: Gauss-Newton on sum_p (L(p) - L(2c - p))^2 over the pixels p within
-// `radius` of the start. A light's highlight on a sphere is symmetric about its centre to
-// first order, and so are its bloom and its flare (the spokes come in opposite pairs), so
-// every pixel of the halo takes part, not only the core's edge: the clipped core alone pins
-// the centre to about 0.15 px, the halo's slopes to a fraction of that. Pixels clipped on
-// both sides cancel. Returns the start when the fit does not settle within `max_shift`.
+// point-symmetric, over the pixels within `radius` of the start. A light's highlight on a
+// sphere is symmetric about its centre to first order, and so are its bloom and its flare
+// (the spokes come in opposite pairs), so every pixel of the halo takes part, not only the
+// core's edge: the clipped core alone pins the centre to about 0.15 px, the halo's slopes to
+// a fraction of that. Pixels clipped on both sides cancel. A highlight on a sloping
+// background (the glare of a glass ball's refracted hot spot beside it, under a light near
+// the camera's axis) is symmetric only once the slope is allowed for, and the plain fit
+// follows the slope by a pixel or more; but the slope's two unknowns also absorb any
+// asymmetry of the halo itself (the lit scene mirrored around it), so it is taken only where
+// it leaves at most kRampAsymmetryShare of the plain fit's residual. Returns the start when
+// the fit does not settle
+// within `max_shift`.
 Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& start_win,
                                  double radius, double max_shift,
                                  const std::function<bool(int, int)>& inside_win) {
@@ -92,40 +176,12 @@ Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& sta
     }
   }
   if (pts.size() < 12) return start_win;
-  Eigen::Vector2d c = start_win;
-  for (int it = 0; it < 20; ++it) {
-    Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
-    Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
-    int used = 0;
-    for (const Eigen::Vector2d& p : pts) {
-      const Eigen::Vector2d q = 2.0 * c - p;
-      if (!inside_win(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())))) {
-        continue;
-      }
-      double vp = 0, vq = 0, xm = 0, xp = 0, ym = 0, yp = 0;
-      if (!bilinear_at(lift, p.x(), p.y(), &vp) || !bilinear_at(lift, q.x(), q.y(), &vq) ||
-          !bilinear_at(lift, q.x() - 0.5, q.y(), &xm) ||
-          !bilinear_at(lift, q.x() + 0.5, q.y(), &xp) ||
-          !bilinear_at(lift, q.x(), q.y() - 0.5, &ym) ||
-          !bilinear_at(lift, q.x(), q.y() + 0.5, &yp)) {
-        continue;
-      }
-      const Eigen::Vector2d j = -2.0 * Eigen::Vector2d(xp - xm, yp - ym);  // d r / d c
-      const double res = vp - vq;
-      jtj += j * j.transpose();
-      jtr += j * res;
-      ++used;
-    }
-    if (used < 12 || std::abs((jtj(0, 0) * jtj(1, 1) - jtj(0, 1) * jtj(1, 0))) < 1e-12)
-      return start_win;  // flat: no slope
-    const double det = (jtj(0, 0) * jtj(1, 1) - jtj(0, 1) * jtj(1, 0));
-    const Eigen::Vector2d step(-(jtj(1, 1) * jtr.x() - jtj(0, 1) * jtr.y()) / det,
-                               -(jtj(0, 0) * jtr.y() - jtj(1, 0) * jtr.x()) / det);
-    c += step.cwiseMax(-0.5).cwiseMin(0.5);  // the linearisation holds within half a pixel
-    if ((c - start_win).norm() > max_shift) return start_win;
-    if (step.norm() < 1e-4) break;
-  }
-  return c;
+  const Symmetry plain = fit_symmetry(lift, pts, start_win, max_shift, false, inside_win);
+  if (!plain.ok) return start_win;
+  const Symmetry sloped = fit_symmetry(lift, pts, plain.centre, max_shift, true, inside_win);
+  if (!sloped.ok || (sloped.centre - start_win).norm() > max_shift) return plain.centre;
+  const bool ramp = sloped.sum_sq / sloped.used < kRampAsymmetryShare * plain.sum_sq / plain.used;
+  return ramp ? sloped.centre : plain.centre;
 }
 
 // Highlights whose core (saturated) or spot (above half the peak) has at most this many
@@ -164,6 +220,13 @@ constexpr double kBlockMedianRimMargin = 0.1;
 // the light as a disc: a core kMergedCoreRatio times as large is cut back to it (cut_to_disc).
 constexpr int kMergedCoreMinPixels = 12;
 constexpr double kMergedCoreRatio = 1.25;
+// On glass, a spot (its clipped core, or where it is not clipped its pixels above half its
+// peak) this many times the sphere's median clipped core, and at least kGlareCoreMinPixels, is
+// the refracted hot spot's glow, not the light's reflection, which is the same small disc in
+// every image (on the photographic renders the reflections' cores are 5-8 pixels and such
+// glow 150-200).
+constexpr double kGlareCoreRatio = 8.0;
+constexpr int kGlareCoreMinPixels = 40;
 
 // A clipped region much larger than the sphere's usual core: the light's image merged with
 // something else clipped beside it (on a mirror sphere, the lit scene mirrored next to the
@@ -979,6 +1042,15 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     std::nth_element(sizes.begin(), sizes.begin() + static_cast<std::ptrdiff_t>(sizes.size() / 2),
                      sizes.end());
     const double median = sizes[sizes.size() / 2];
+    if (out.material == SphereMaterial::kGlass) {
+      for (std::size_t q = 0; q < wants.size(); ++q) {
+        Located& loc = located[q];
+        if (static_cast<std::size_t>(wants[q].sphere) != k || !loc.ok) continue;
+        if (loc.pixels >= kGlareCoreMinPixels && loc.pixels > kGlareCoreRatio * median) {
+          loc.glare_ratio = loc.pixels / median;
+        }
+      }
+    }
     if (median < kMergedCoreMinPixels) continue;  // small cores: no disc to fit
     for (std::size_t q = 0; q < wants.size(); ++q) {
       if (static_cast<std::size_t>(wants[q].sphere) != k || !located[q].ok ||
@@ -1012,6 +1084,15 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     if (loc.pixels > sphere_area_factor * c.radius_px * c.radius_px) {
       light.flag = "highlight core covers " + std::to_string(loc.pixels) +
                    " pixels: not a compact highlight (a reflection of the scene?)";
+      return;
+    }
+    if (loc.glare_ratio > 0.0) {
+      char why[200];
+      std::snprintf(why, sizeof why,
+                    "the spot covers %d pixels, %.0f times the sphere's usual clipped core: the "
+                    "glow of the refracted hot spot, not the light's reflection",
+                    loc.pixels, loc.glare_ratio);
+      light.flag = why;
       return;
     }
     light.direction = reflect_highlight(c, det.camera, light.highlight_px, ev.w, ev.h);
