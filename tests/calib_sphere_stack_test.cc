@@ -582,6 +582,19 @@ TEST(CalibSphereStack, PhotoLargeSphereInADarkRoomIsFound) {
 
 // photo-large-sphere rendered as `ptmkit synth` writes it (seed `seed`) and calibrated from its
 // JPEG files without hints; the circle's and the lights' errors against the render's truth.
+// A photographic capture rendered as `ptmkit synth` writes it (JPEG files with EXIF) into
+// `dir`; returns the photographs, in light order.
+std::vector<fs::path> render_photo_files(const synth::PhotoOptions& po, const fs::path& dir) {
+  const synth::PhotoReport rendered = synth::render_photo_capture(po, dir);
+  std::vector<fs::path> photos;
+  for (const fs::path& f : rendered.files) {
+    if (f.parent_path() == dir && f.filename().string().rfind("image_", 0) == 0) {
+      photos.push_back(f);
+    }
+  }
+  return photos;
+}
+
 struct LargeSphereRun {
   StackCalibration result;
   synth::PhotoTruth truth;
@@ -593,15 +606,9 @@ LargeSphereRun calibrate_large_sphere(std::uint64_t seed) {
   test::ScratchDir dir;
   synth::PhotoOptions po = synth::photo_preset_options("photo-large-sphere");
   po.seed = seed;
-  const synth::PhotoReport rendered = synth::render_photo_capture(po, dir.path());
+  const std::vector<fs::path> photos = render_photo_files(po, dir.path());
   LargeSphereRun run;
   run.truth = synth::PhotoRenderer(po).truth();
-  std::vector<fs::path> photos;
-  for (const fs::path& f : rendered.files) {
-    if (f.parent_path() == dir.path() && f.filename().string().rfind("image_", 0) == 0) {
-      photos.push_back(f);
-    }
-  }
   StackCalibrationOptions o;
   o.rig.sphere_count = 1;
   o.rig.detection.camera.focal_px = po.focal_px;
@@ -917,14 +924,8 @@ TEST(CalibSphereStack, AReflectionInTheGlowOfTheHotSpotIsFoundAndCentredOnTheRam
   po.lights = "rings:15:4,40:4,84:4";
   po.seed = 4;
   synth::resize_photo(1280, 720, &po);
-  const synth::PhotoReport rendered = synth::render_photo_capture(po, dir.path());
+  const std::vector<fs::path> photos = render_photo_files(po, dir.path());
   const synth::PhotoTruth truth = synth::PhotoRenderer(po).truth();
-  std::vector<fs::path> photos;
-  for (const fs::path& f : rendered.files) {
-    if (f.parent_path() == dir.path() && f.filename().string().rfind("image_", 0) == 0) {
-      photos.push_back(f);
-    }
-  }
   ASSERT_EQ(photos.size(), truth.light_dirs.size());
   StackCalibrationOptions o;
   o.rig.sphere_count = 2;
