@@ -54,6 +54,7 @@ struct SphereArgs {
   std::string json;
   bool drop_outliers = false;
   bool no_refine = false;
+  bool distant_lights = false;
   double outlier_px = 1.5;
   std::string mask;
   std::string principal;
@@ -98,6 +99,7 @@ void run_sphere(const SphereArgs& args) {
   options.sphere_count = args.sphere_count;
   options.sphere_radius_mm = args.sphere_radius_mm;
   options.refine = !args.no_refine;
+  options.near_from_evidence = !args.distant_lights;
   options.outlier_px = args.outlier_px;
   if (!args.spheres.empty() && !args.mask.empty()) {
     throw Error("give the sphere either by --sphere or by --mask, not both");
@@ -227,7 +229,11 @@ void run_sphere(const SphereArgs& args) {
               report.model.c_str(), report.refined ? ", refined" : "", report.usable(),
               report.lights.size(), report.outliers(), dropped > 0 ? " (dropped)" : "",
               args.output.c_str(), args.json.empty() ? "" : " and ", args.json.c_str());
-  if (report.near) std::printf("  light positions: origin at %s\n", report.origin.c_str());
+  if (!report.model_note.empty()) std::printf("  %s\n", report.model_note.c_str());
+  if (report.near) {
+    std::printf("  light %s: origin at %s\n", report.near_scale_free ? "directions" : "positions",
+                report.origin.c_str());
+  }
   if (!report.near && report.spheres.size() >= 2 && 2 * report.outliers() > report.usable()) {
     std::printf(
         "  most lights disagree between the spheres: near lights? (give --sphere-radius-mm "
@@ -304,6 +310,12 @@ void add_calibrate_command(CLI::App& root) {
                  "(default origin: the optical axis at the spheres' mean depth)");
   sp->add_option("--json", sphere->json,
                  "Also write every light as JSON (directions, positions in mm)");
+  sp->add_flag("--distant-lights", sphere->distant_lights,
+               "Keep the distant-light model even where the spheres disagree. By default, with "
+               "a focal length, 2+ spheres and neither --sphere-radius-mm nor --plane, near "
+               "lights are taken where most lights disagree between the spheres as distant "
+               "ones and near ones explain them (directions from the origin; the report says "
+               "why)");
   sp->add_flag("--no-refine", sphere->no_refine,
                "Skip the joint refinement (per-sphere reflections, linear triangulation)");
   sp->add_option("--outlier-px", sphere->outlier_px,

@@ -160,9 +160,11 @@ RigReport calibrate_rig(const std::vector<Image>& images,
   return refine_rig(std::move(spheres), names, images[0].width(), images[0].height(), options);
 }
 
-RigReport refine_rig(std::vector<SphereReport> spheres,
-                     const std::vector<std::filesystem::path>& names, int w, int h,
-                     const RigOptions& options) {
+namespace {
+
+RigReport refine_rig_model(std::vector<SphereReport> spheres,
+                           const std::vector<std::filesystem::path>& names, int w, int h,
+                           const RigOptions& options) {
   if (const auto err = options.validate(); !err.empty()) throw Error("sphere rig: " + err);
   if (spheres.empty()) throw Error("sphere rig: no spheres");
   const SphereCamera& camera = options.detection.camera;
@@ -451,6 +453,48 @@ RigReport refine_rig(std::vector<SphereReport> spheres,
   return report;
 }
 
+}  // namespace
+
+RigReport refine_rig(std::vector<SphereReport> spheres,
+                     const std::vector<std::filesystem::path>& names, int w, int h,
+                     const RigOptions& options) {
+  const bool may_be_near = options.near_from_evidence && options.sphere_radius_mm == 0.0 &&
+                           options.detection.camera.focal_px > 0.0 && spheres.size() >= 2 &&
+                           !options.plane;
+  if (!may_be_near) return refine_rig_model(std::move(spheres), names, w, h, options);
+  RigReport distant = refine_rig_model(spheres, names, w, h, options);
+  if (2 * distant.outliers() <= distant.usable()) return distant;
+  RigOptions near_options = options;
+  near_options.sphere_radius_mm = 1.0;  // distances in units of the sphere radius
+  RigReport near = refine_rig_model(std::move(spheres), names, w, h, near_options);
+  const bool better = 4 * near.outliers() <= near.usable() &&
+                      2 * near.outliers() <= distant.outliers() && near.usable() > 0;
+  if (!better) return distant;
+  near.near_scale_free = true;
+  near.model = "pinhole near";
+  char note[300];
+  std::snprintf(note, sizeof note,
+                "near lights, chosen from the evidence: as distant lights %d of %d are "
+                "outliers (the spheres see them along different directions), as near ones %d "
+                "of %d; directions from the origin, distances unknown (give "
+                "--sphere-radius-mm for positions)",
+                distant.outliers(), distant.usable(), near.outliers(), near.usable());
+  near.model_note = note;
+  for (std::size_t i = 0; i < near.lights.size(); ++i) {
+    RigLight& l = near.lights[i];
+    l.position_mm.reset();
+    l.position_camera_mm.reset();
+    // A near light needs two spheres; one seen on a single sphere keeps that sphere's
+    // direction (off by the parallax between that sphere and the origin).
+    if (!l.found && distant.lights[i].found) {
+      l = distant.lights[i];
+      append_flag(&l.flag, "seen on one sphere: its direction from that sphere alone");
+      l.outlier = true;
+    }
+  }
+  return near;
+}
+
 LightSet rig_light_set(const RigReport& report) {
   LightSet set;
   for (const RigLight& l : report.lights) {
@@ -496,6 +540,7 @@ int drop_outliers(RigReport* report) {
 std::string RigReport::to_json() const {
   nlohmann::json j;
   j["model"] = model;
+  if (!model_note.empty()) j["model_note"] = model_note;
   j["refined"] = refined;
   j["iterations"] = iterations;
   j["origin"] = origin;
@@ -511,7 +556,7 @@ std::string RigReport::to_json() const {
     if (k < centres_camera.size()) {
       const auto& a = centres_camera_initial[k];
       const auto& b = centres_camera[k];
-      const char* unit = near ? "centre_camera_mm" : "centre_camera_radii";
+      const char* unit = near && !near_scale_free ? "centre_camera_mm" : "centre_camera_radii";
       s["initial"] = {{unit, {a.x(), a.y(), a.z()}}};
       s["refined"] = {{unit, {b.x(), b.y(), b.z()}}};
     }

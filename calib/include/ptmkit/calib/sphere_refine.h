@@ -60,8 +60,17 @@ struct RigOptions {
   std::vector<Circle> spheres;
   int sphere_count = 1;
   // The spheres' real radius in millimetres. With a pinhole camera and 2+ spheres: near
-  // lights, positions triangulated. 0 = distant lights (directions only).
+  // lights, positions triangulated. 0 = distant lights (directions only), unless the
+  // evidence asks for near ones (near_from_evidence).
   double sphere_radius_mm = 0.0;
+  // With a pinhole camera, 2+ spheres, no sphere radius and no sample plane: where most
+  // lights are outliers as distant lights (the spheres see them along different directions:
+  // a dome whose lights are near), near lights are tried with distances in units of the
+  // sphere radius, and taken where they leave at most a quarter of the lights outliers and
+  // at most half as many as the distant model. Directions are then from the light frame's
+  // origin; positions are not reported (their scale needs sphere_radius_mm). A light seen on
+  // one sphere only keeps its direction from that sphere, flagged.
+  bool near_from_evidence = true;
   // The sample plane (optional; pinhole only; needs its pose and the images' size): light
   // frame and origin from it. Without it
   // the light frame is the camera's turned to face it (x right, y up the image, z toward the
@@ -106,6 +115,10 @@ struct RigReport {
   double outline_rms_px = 0.0;  // outline residual after refinement
   bool refined = false;
   bool near = false;
+  // Near lights chosen from the evidence (near_from_evidence): distances in units of the
+  // sphere radius, no positions; `model_note` says why.
+  bool near_scale_free = false;
+  std::string model_note;
   std::string model;   // "orthographic distant", "pinhole distant", "pinhole near"
   std::string origin;  // where the light frame's origin is
   int iterations = 0;
