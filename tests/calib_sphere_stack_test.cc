@@ -948,6 +948,41 @@ TEST(CalibSphereStack, AReflectionInTheGlowOfTheHotSpotIsFoundAndCentredOnTheRam
   EXPECT_LE(worst, kLightMaxTargetDeg);
 }
 
+// The light above the camera on glass, with a thicker clipped disc painted near each marble's
+// rim below its reflection and joined to it by a bright (unclipped) line, so that both lie in
+// one spot: the disc is taken first and reflects to below the sample plane on both marbles (as
+// a piece of the hot spot's glow at the rim does at 4608 x 2592, where the light was lost).
+// The next clipped component of the window is tried, and the reflection found.
+TEST(CalibSphereStack, GlassTriesTheNextClippedSpotWhenTheFirstReflectsBelowThePlane) {
+  PhotoImages p = render_photo("photo-glass", "rings:15:3,40:3,65:2,75:2,90:1", 4);
+  const std::size_t zenith = p.truth.light_dirs.size() - 1;
+  ASSERT_GT(p.truth.light_dirs[zenith].z(), 0.999);
+  Image& img = p.images[zenith];
+  for (std::size_t k = 0; k < 2; ++k) {
+    const synth::SphereOutline& o = p.truth.spheres[k].outline;
+    ASSERT_TRUE(p.truth.spheres[k].highlight_px[zenith].has_value());
+    const Eigen::Vector2d dot = *p.truth.spheres[k].highlight_px[zenith];
+    const Eigen::Vector2d disc = o.centre_px + Eigen::Vector2d(0.0, 0.9 * o.radius_px);
+    paint_clipped_disc(&img, disc, 2.5);
+    for (double t = 0.0; t <= 1.0; t += 0.02) {
+      const Eigen::Vector2d q = dot + t * (disc - dot);
+      const int x = static_cast<int>(std::lround(q.x()));
+      const int y = static_cast<int>(std::lround(q.y()));
+      for (int c = 0; c < img.channels(); ++c) img.at(x, y, c) = std::max(img.at(x, y, c), 0.9f);
+    }
+  }
+  const StackCalibration r = calibrate_photo(p, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  EXPECT_EQ(r.material, SphereMaterial::kGlass) << r.material_note;
+  const RigLight& l = r.rig.lights[zenith];
+  ASSERT_TRUE(l.found) << l.flag;
+  const double err = angle_deg(l.direction, p.truth.light_dirs[zenith]);
+  std::printf("glass, light above the camera past a painted disc: %.2f deg off (%s)\n", err,
+              l.flag.c_str());
+  EXPECT_LE(err, kLightMaxTargetDeg);
+  EXPECT_TRUE(l.outlier) << "taken past another clipped spot: doubtful";
+}
+
 // A photographic render calibrated as at photo size: analysed at half its size (scale 2), so
 // that the photo-size composites are the mean and the maximum, and every circle checked against
 // the targets (label: what the printed line calls it).

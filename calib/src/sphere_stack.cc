@@ -227,6 +227,9 @@ constexpr double kMergedCoreRatio = 1.25;
 // glow 150-200).
 constexpr double kGlareCoreRatio = 8.0;
 constexpr int kGlareCoreMinPixels = 40;
+// On glass, how many more clipped components of a spot's window are tried when the one taken
+// reflects to below the sample plane.
+constexpr int kGlassRetries = 3;
 
 // A clipped region much larger than the sphere's usual core: the light's image merged with
 // something else clipped beside it (on a mirror sphere, the lit scene mirrored next to the
@@ -406,7 +409,8 @@ cv::Mat linear_lift(const cv::Mat& l, const cv::Mat& base, bool srgb) {
 // `inside` tells photo pixels on the sphere's searched disc, `srgb` that the samples are
 // sRGB-encoded.
 Located locate(const Window& win, const cv::Mat& base, const std::function<bool(int, int)>& inside,
-               bool srgb, double core_radius_hint = 0.0, double compact_max_pixels = 0.0) {
+               bool srgb, double core_radius_hint = 0.0, double compact_max_pixels = 0.0,
+               const std::vector<Eigen::Vector2d>& skip_px = {}) {
   Located out;
   std::optional<Eigen::Vector2d> disc_centre;  // window pixels, see cut_to_disc
   const cv::Mat& l = win.luma;
@@ -467,13 +471,23 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     cv::distanceTransform(cpad, cdist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
     std::vector<int> area(static_cast<std::size_t>(k), 0);
     std::vector<float> depth(static_cast<std::size_t>(k), 0.0f);
+    std::vector<Eigen::Vector2d> sum(static_cast<std::size_t>(k), Eigen::Vector2d::Zero());
     for (int y = 0; y < l.rows; ++y) {
       for (int x = 0; x < l.cols; ++x) {
         const auto j = static_cast<std::size_t>(labels.at<int>(y, x));
         ++area[j];
         depth[j] = std::max(depth[j], cdist.at<float>(y + 1, x + 1));
+        sum[j] += Eigen::Vector2d(x + win.rect.x, y + win.rect.y);
       }
     }
+    // Components already tried (a highlight taken there proved unusable): their centre within
+    // a core's radius (at least 3 px) of a skipped point.
+    auto skipped = [&](std::size_t j) {
+      const Eigen::Vector2d c = sum[j] / std::max(1, area[j]);
+      const double reach = std::max(3.0, std::sqrt(area[j] / std::numbers::pi));
+      return std::any_of(skip_px.begin(), skip_px.end(),
+                         [&](const Eigen::Vector2d& p) { return (p - c).norm() <= reach; });
+    };
     // Given compact_max_pixels (glass), a component larger than a compact highlight can be is
     // passed over while a compact one is left: a glass ball's refracted hot spot is a broad
     // clipped area, and under a light near the camera's axis the surface reflection, a small
@@ -484,6 +498,7 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     int best = 0;
     for (int j = 1; j < k; ++j) {
       const auto jj = static_cast<std::size_t>(j), bb = static_cast<std::size_t>(best);
+      if (skipped(jj)) continue;
       const bool better = best == 0 || (compact(jj) && !compact(bb)) ||
                           (compact(jj) == compact(bb) &&
                            (depth[jj] > depth[bb] + 0.25f ||
@@ -1101,8 +1116,9 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   };
   for (std::size_t q = 0; q < wants.size(); ++q) {
     if (wants[q].alternate_rank >= 0) continue;
-    evaluate(q, &reports[static_cast<std::size_t>(wants[q].sphere)]
-                     .lights[static_cast<std::size_t>(wants[q].image)]);
+    SphereLight& light = reports[static_cast<std::size_t>(wants[q].sphere)]
+                             .lights[static_cast<std::size_t>(wants[q].image)];
+    evaluate(q, &light);
   }
   // Two comparable spots and the one taken unusable (a glass ball's refracted hot spot is
   // larger than a compact highlight, or reflects to below the plane): the other is taken when
@@ -1119,6 +1135,52 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     other.second_peak = light.peak;
     other.spot_rank = wants[q].alternate_rank;
     light = other;
+  }
+  // On glass a compact piece of the hot spot's glow, at its edge, can reflect to below the
+  // plane while the reflection, a smaller dot in the same spot's window, is left. Where no
+  // sphere has the light, the next clipped components of the window are tried (at most
+  // kGlassRetries), the light taken from the first usable one; it stays doubtful
+  // (second_peak: the component passed over). Where another sphere has it, the light is
+  // theirs: a piece of the glow that happens to reflect above the plane would only pull it.
+  auto seen_elsewhere = [&](const Want& w) {
+    for (std::size_t k = 0; k < k_spheres; ++k) {
+      if (static_cast<int>(k) != w.sphere &&
+          reports[k].lights[static_cast<std::size_t>(w.image)].found) {
+        return true;
+      }
+    }
+    return false;
+  };
+  for (std::size_t q = 0; q < wants.size(); ++q) {
+    if (wants[q].alternate_rank >= 0) continue;
+    SphereLight& light = reports[static_cast<std::size_t>(wants[q].sphere)]
+                             .lights[static_cast<std::size_t>(wants[q].image)];
+    if (out.material != SphereMaterial::kGlass || light.found || !located[q].ok ||
+        !located[q].saturated || seen_elsewhere(wants[q])) {
+      continue;
+    }
+    const Circle& c = circles[static_cast<std::size_t>(wants[q].sphere)];
+    std::vector<Eigen::Vector2d> skip{located[q].px};
+    const Located first = located[q];
+    for (int t = 0; t < kGlassRetries && !light.found; ++t) {
+      located[q] = locate(windows[q], bases[q], inside_of(q), srgb, 0.0,
+                          sphere_area_factor * c.radius_px * c.radius_px, skip);
+      if (!located[q].ok || !located[q].saturated ||
+          std::any_of(skip.begin(), skip.end(),
+                      [&](const Eigen::Vector2d& p) { return (p - located[q].px).norm() < 1.0; })) {
+        break;
+      }
+      SphereLight other = light;
+      other.flag.clear();
+      evaluate(q, &other);
+      if (other.found) {
+        other.second_peak = first.peak;
+        light = other;
+        break;
+      }
+      skip.push_back(located[q].px);
+    }
+    if (!light.found) located[q] = first;
   }
   out.rig = refine_rig(std::move(reports), names, ev.w, ev.h, rig);
   return out;
