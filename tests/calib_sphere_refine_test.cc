@@ -99,20 +99,36 @@ struct Stats {
 };
 
 // Near lights on the dome: triangulated positions against the truth, in % of the radius.
-Stats triangulate(double noise_grey, RigReport* out = nullptr, bool refine = true,
-                  double light_radius_deg = 2.0) {
-  const auto dirs = layout_directions("rings:30:6:15,50:6,70:4:45,90:1");
-  synth::SphereRigOptions rig = two_sphere_rig();
-  rig.noise_grey = noise_grey;
-  rig.light_radius_deg = light_radius_deg;
+// The rig under 17 near lights on the dome (directions from the dome's centre in `dirs`).
+struct DomeCapture {
+  std::vector<Eigen::Vector3d> dirs;
+  synth::SphereRigOptions rig;
   std::vector<Image> images;
   std::vector<fs::path> names;
-  for (std::size_t i = 0; i < dirs.size(); ++i) {
-    rig.light_position_mm = camera_from_light(kDome * dirs[i]);
+};
+DomeCapture render_dome(double noise_grey, double light_radius_deg = 2.0) {
+  DomeCapture d;
+  d.dirs = layout_directions("rings:30:6:15,50:6,70:4:45,90:1");
+  d.rig = two_sphere_rig();
+  d.rig.noise_grey = noise_grey;
+  d.rig.light_radius_deg = light_radius_deg;
+  synth::SphereRigOptions rig = d.rig;
+  for (std::size_t i = 0; i < d.dirs.size(); ++i) {
+    rig.light_position_mm = camera_from_light(kDome * d.dirs[i]);
     rig.seed = i + 1;
-    images.push_back(synth::render_sphere_rig(rig));
-    names.emplace_back("img" + std::to_string(i) + ".png");
+    d.images.push_back(synth::render_sphere_rig(rig));
+    d.names.emplace_back("img" + std::to_string(i) + ".png");
   }
+  return d;
+}
+
+Stats triangulate(double noise_grey, RigReport* out = nullptr, bool refine = true,
+                  double light_radius_deg = 2.0) {
+  const DomeCapture d = render_dome(noise_grey, light_radius_deg);
+  const auto& dirs = d.dirs;
+  const auto& rig = d.rig;
+  const auto& images = d.images;
+  const auto& names = d.names;
   RigOptions o;
   o.sphere_count = 2;  // found
   o.detection.camera.focal_px = rig.focal_px;
@@ -177,24 +193,15 @@ TEST(CalibSphereRefine, TwoSpheresTriangulateNearLightsWithinOnePercentOfTheDome
 constexpr double kNearFromEvidenceMeanDeg = 0.2;
 constexpr double kNearFromEvidenceMaxDeg = 1.0;
 TEST(CalibSphereRefine, NearLightsAreTakenFromTheEvidenceWithoutTheSpheresSize) {
-  const auto dirs = layout_directions("rings:30:6:15,50:6,70:4:45,90:1");
-  synth::SphereRigOptions rig = two_sphere_rig();
-  rig.noise_grey = 1.0;
-  std::vector<Image> images;
-  std::vector<fs::path> names;
-  for (std::size_t i = 0; i < dirs.size(); ++i) {
-    rig.light_position_mm = camera_from_light(kDome * dirs[i]);
-    rig.seed = i + 1;
-    images.push_back(synth::render_sphere_rig(rig));
-    names.emplace_back("img" + std::to_string(i) + ".png");
-  }
+  const DomeCapture d = render_dome(1.0);
+  const auto& dirs = d.dirs;
   RigOptions o;
   o.sphere_count = 2;
-  o.detection.camera.focal_px = rig.focal_px;
-  o.detection.camera.principal_px = rig.principal_px;
-  const RigReport near = calibrate_rig(images, names, o);
+  o.detection.camera.focal_px = d.rig.focal_px;
+  o.detection.camera.principal_px = d.rig.principal_px;
+  const RigReport near = calibrate_rig(d.images, d.names, o);
   o.near_from_evidence = false;
-  const RigReport distant = calibrate_rig(images, names, o);
+  const RigReport distant = calibrate_rig(d.images, d.names, o);
   // The light frame's origin: on the optical axis at the spheres' centres' depth.
   const Eigen::Vector3d origin(0.0, 0.0, kSphere);
   auto errors = [&](const RigReport& r) {
