@@ -55,6 +55,7 @@ struct SphereArgs {
   bool drop_outliers = false;
   bool no_refine = false;
   bool distant_lights = false;
+  bool allow_disagreement = false;
   double outlier_px = 1.5;
   std::string mask;
   std::string principal;
@@ -153,6 +154,7 @@ void run_sphere(const SphereArgs& args) {
   }
   if (!args.reference.empty()) stack_options.search.reference = args.reference;
   stack_options.search.min_score = args.min_score;
+  stack_options.allow_disagreement = args.allow_disagreement;
   stack_options.material = args.sphere_material == "mirror"  ? calib::SphereMaterial::kMirror
                            : args.sphere_material == "glass" ? calib::SphereMaterial::kGlass
                                                              : calib::SphereMaterial::kAuto;
@@ -310,6 +312,10 @@ void add_calibrate_command(CLI::App& root) {
                  "(default origin: the optical axis at the spheres' mean depth)");
   sp->add_option("--json", sphere->json,
                  "Also write every light as JSON (directions, positions in mm)");
+  sp->add_flag("--allow-disagreement", sphere->allow_disagreement,
+               "Write the lights even where two or more spheres found, with a focal length, "
+               "disagree about more than three quarters of them (by default an error listing "
+               "the candidates: such spheres are most likely not the capture's)");
   sp->add_flag("--distant-lights", sphere->distant_lights,
                "Keep the distant-light model even where the spheres disagree. By default, with "
                "a focal length, 2+ spheres and neither --sphere-radius-mm nor --plane, near "

@@ -1183,6 +1183,21 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     if (!light.found) located[q] = first;
   }
   out.rig = refine_rig(std::move(reports), names, ev.w, ev.h, rig);
+  const int usable = out.rig.usable(), outliers = out.rig.outliers();
+  // Only where the camera is known: without a focal length the orthographic model itself
+  // makes spheres away from the image centre disagree.
+  if (detected && k_spheres >= 2 && out.camera.focal_px > 0.0 && !options.allow_disagreement &&
+      usable >= 4 && outliers > kMostLightsDisagree * usable) {
+    std::string msg = "the spheres found disagree about " + std::to_string(outliers) + " of " +
+                      std::to_string(usable) + " lights (" + out.rig.model +
+                      " model): they are most likely not the capture's spheres; candidates:";
+    const std::size_t show = std::min<std::size_t>(out.candidates.size(), 8);
+    for (std::size_t k = 0; k < show; ++k) msg += "\n  " + describe(out.candidates[k]);
+    msg +=
+        "\nhelp the search with --roi x,y,w,h (a box per sphere), --radius-range MIN,MAX, "
+        "--reference IMG, or give --sphere cx,cy,r; or keep these with --allow-disagreement";
+    throw SphereSearchError(msg, out.candidates);
+  }
   return out;
 }
 

@@ -200,5 +200,7 @@ Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& r
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
                                              double min_peak, int count, const SphereCamera& camera,
                                              std::vector<Circle>* chosen_photo);
+// One line on a candidate: circle, score and its parts, why chosen or refused.
+std::string describe(const SphereCandidate& c);
 
 }  // namespace ptmkit::calib::stack_detail

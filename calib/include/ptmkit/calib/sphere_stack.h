@@ -105,7 +105,16 @@ struct StackCalibrationOptions {
   RigOptions rig;
   SphereSearchOptions search;
   SphereMaterial material = SphereMaterial::kAuto;
+  // Spheres found (not given), two or more, a pinhole camera (a focal length; without one the
+  // orthographic model itself makes off-centre spheres disagree): when they disagree about
+  // more than kMostLightsDisagree of the usable lights under the model taken (distant, or
+  // near from the evidence), they are most likely not the capture's spheres and
+  // SphereSearchError is thrown with the candidates. true: the lights are kept (flagged as
+  // outliers).
+  bool allow_disagreement = false;
 };
+// See StackCalibrationOptions::allow_disagreement.
+inline constexpr double kMostLightsDisagree = 0.75;
 
 struct SphereCandidate {
   Circle circle;           // photo pixels
