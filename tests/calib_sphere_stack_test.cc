@@ -913,6 +913,15 @@ TEST(CalibSphereStack, GlassUnderALightAboveTheCameraKeepsItsReflection) {
   EXPECT_LE(worst, kLightMaxTargetDeg);
 }
 
+// The photo-glass preset (seed 4) at `lights`, rendered at width x height.
+synth::PhotoOptions glass_photo_options(const std::string& lights, int width, int height) {
+  synth::PhotoOptions po = synth::photo_preset_options("photo-glass");
+  po.lights = lights;
+  po.seed = 4;
+  synth::resize_photo(width, height, &po);
+  return po;
+}
+
 // Under a light 84 degrees up a glass marble's reflection lies in the glow of its refracted hot
 // spot. The glow climbs steeply toward the marble's centre, so the reflection's halo is
 // symmetric only on top of that ramp (centred on plain symmetry it follows the ramp: 1.5
@@ -920,10 +929,7 @@ TEST(CalibSphereStack, GlassUnderALightAboveTheCameraKeepsItsReflection) {
 // spot that agrees better with the other marble's at the coarse scale (taken, 43 degrees off).
 TEST(CalibSphereStack, AReflectionInTheGlowOfTheHotSpotIsFoundAndCentredOnTheRamp) {
   test::ScratchDir dir;
-  synth::PhotoOptions po = synth::photo_preset_options("photo-glass");
-  po.lights = "rings:15:4,40:4,84:4";
-  po.seed = 4;
-  synth::resize_photo(1280, 720, &po);
+  const synth::PhotoOptions po = glass_photo_options("rings:15:4,40:4,84:4", 1280, 720);
   const std::vector<fs::path> photos = render_photo_files(po, dir.path());
   const synth::PhotoTruth truth = synth::PhotoRenderer(po).truth();
   ASSERT_EQ(photos.size(), truth.light_dirs.size());
@@ -1076,10 +1082,7 @@ TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOf
 // flagged.
 TEST(CalibSphereStack, CommandRefusesSpheresThatDisagreeAboutMostLights) {
   test::ScratchDir dir;
-  synth::PhotoOptions po = synth::photo_preset_options("photo-glass");
-  po.lights = "rings:20:4,75:6,84:4";
-  po.seed = 4;
-  synth::resize_photo(960, 540, &po);
+  const synth::PhotoOptions po = glass_photo_options("rings:20:4,75:6,84:4", 960, 540);
   const std::vector<fs::path> photos = render_photo_files(po, dir.path());
   std::vector<std::string> run{"calibrate", "sphere"};
   for (const fs::path& f : photos) run.push_back(f.string());
