@@ -471,7 +471,6 @@ RigReport refine_rig(std::vector<SphereReport> spheres,
                       2 * near.outliers() <= distant.outliers() && near.usable() > 0;
   if (!better) return distant;
   near.near_scale_free = true;
-  near.model = "pinhole near";
   char note[300];
   std::snprintf(note, sizeof note,
                 "near lights, chosen from the evidence: as distant lights %d of %d are "
