@@ -207,6 +207,9 @@ constexpr double kLightLiftShare = 0.25;
 // The full-resolution circle is chosen by the rim points within this distance (see
 // consensus_circle).
 constexpr double kRimChoiceTolPx = 1.0;
+// How sharp a composite shows a rim: the share of rays whose edge lies within this many of its
+// pixels of the circle fitted (rim_circle's `tight`).
+constexpr double kTightRimPx = 0.5;
 
 // At scale > 1, a photo-size rim circle supported by kBlockMedianRimMargin fewer rays than the
 // one on the median of the block means is taken to be moved by what moves in the stack (glass
@@ -668,9 +671,10 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
 // The rim circle near `around` on a composite (contrast-stretched, of the logarithm if asked;
 // smoothed by a 1 px Gaussian): the consensus of the strongest edges on 360 rays, refitted to
 // the points against brighter surroundings where both kinds are present; circles are fitted
-// in `op` (the outline under the camera: OutlinePlane). `rim`: the share of rays supporting it.
+// in `op` (the outline under the camera: OutlinePlane). `rim`: the share of rays supporting it;
+// `tight`: the share whose edge lies within kTightRimPx of it (how sharp a rim the plane shows).
 Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
-                  const OutlinePlane& op, double* rim) {
+                  const OutlinePlane& op, double* rim, double* tight = nullptr) {
   cv::Mat f = stretch(plane, CV_32F, logarithm);
   cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
   int inside = 0;
@@ -678,6 +682,15 @@ Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
   for (Eigen::Vector2d& p : e) p = op.to(p);
   Circle r = op.from(consensus_circle(e, op.to(around), rim, kRimChoiceTolPx));
   rim_against_brighter(f, op, &r);
+  if (tight != nullptr) {
+    // In the outline plane, whose units are the plane's pixels.
+    const Circle q = op.to(r);
+    int n = 0;
+    for (const Eigen::Vector2d& p : e) {
+      if (std::abs((p - q.centre_px).norm() - q.radius_px) <= kTightRimPx) ++n;
+    }
+    *tight = n / 360.0;
+  }
   return r;
 }
 
@@ -735,18 +748,19 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     const OutlinePlane small_plane(det.camera, ev.w, ev.h, ev.scale);
     for (const Circle& c : small) {
       Circle best = c;
-      double best_rim = 0.0;
+      double best_rim = 0.0, best_tight = 0.0;
       // Linear brightness first: the logarithm shows a faint rim but moves a clear one's
       // steepest point toward its dark side.
       bool done = false;
       for (const bool logarithm : {false, true}) {
         for (const auto& [name, plane] : planes) {
-          double rim = 0.0;
-          const Circle r = rim_circle(*plane, logarithm, c, photo_plane, &rim);
+          double rim = 0.0, tight = 0.0;
+          const Circle r = rim_circle(*plane, logarithm, c, photo_plane, &rim, &tight);
           if (rim > best_rim &&
               (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
               std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {
             best_rim = rim;
+            best_tight = tight;
             best = r;
           }
           if (rim >= 0.3) {
@@ -756,22 +770,50 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         }
         if (done) break;
       }
-      // At scale > 1 the photo-size composites hold what moves (a glass ball's caustics and
-      // refracted hot spots beside its limb, flares): the rim is measured on the median of
-      // the block means too, at the analysis size, and taken where clearly more rays support
-      // it (kBlockMedianRimMargin; glass at 1600 x 900: 0.4 to 0.02-0.03 px off).
-      if (!ev.small_block_median.empty()) {
-        Circle cs;
-        cs.centre_px = small_px(c.centre_px, ev.scale);
-        cs.radius_px = c.radius_px / ev.scale;
+      // The rims of the analysis-size still composites: the first of linear and logarithmic
+      // brightness supported by 0.3 of the rays (the lower quartile's also near the
+      // candidate: where the sphere's shadows darken its surroundings in a quarter of the
+      // images, it can show another circle).
+      Circle cs;
+      cs.centre_px = small_px(c.centre_px, ev.scale);
+      cs.radius_px = c.radius_px / ev.scale;
+      struct StillRim {
+        Circle circle;
+        double rim = 0.0, tight = 0.0;
+        bool found = false;
+      };
+      auto still_rim = [&](const cv::Mat& plane, const OutlinePlane& op, bool near_candidate) {
+        StillRim sr;
         for (const bool logarithm : {false, true}) {
-          double rim = 0.0;
-          const Circle r = rim_circle(ev.small_block_median, logarithm, cs, small_plane, &rim);
-          if (rim < 0.3) continue;
-          const Circle median = to_photo(r, ev.scale);
-          if (rim > best_rim + kBlockMedianRimMargin) best = median;
+          const Circle r = rim_circle(plane, logarithm, cs, op, &sr.rim, &sr.tight);
+          if (sr.rim < 0.3) continue;
+          sr.circle = to_photo(r, ev.scale);
+          sr.found = !near_candidate ||
+                     ((sr.circle.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
+                      std::abs(sr.circle.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale);
           break;
         }
+        return sr;
+      };
+      // Under lights near the camera's axis a glass ball's refracted hot spot glows over its
+      // limb, and with few lights that glow is in the median of the images too, blurring the
+      // rim there into a ramp (rings:15:3,40:3,65:2,80:4 at 1280 x 720: 0.66-0.69 px off on
+      // one marble). The lower quartile keeps the rim sharp where the glow does not cover it
+      // in most images; it is taken where more rays' edges lie within kTightRimPx of its
+      // circle than of the one chosen above (the median's at scale 1, the block median's
+      // below).
+      const StillRim lower = still_rim(ev.small_lower_quartile, small_plane, true);
+      if (ev.scale == 1) {
+        if (lower.found && lower.tight > best_tight) best = lower.circle;
+      } else {
+        // At scale > 1 the photo-size composites hold what moves (a glass ball's caustics
+        // and refracted hot spots beside its limb, flares): the rim is measured on the
+        // median of the block means too (or their lower quartile, as above), at the
+        // analysis size, and taken where clearly more rays support it
+        // (kBlockMedianRimMargin; glass at 1600 x 900: 0.4 to 0.02-0.03 px off).
+        StillRim still = still_rim(ev.small_block_median, small_plane, false);
+        if (lower.found && (!still.found || lower.tight > still.tight)) still = lower;
+        if (still.found && still.rim > best_rim + kBlockMedianRimMargin) best = still.circle;
       }
       circles.push_back(best);
     }

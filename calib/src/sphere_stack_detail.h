@@ -109,6 +109,11 @@ struct Evidence {
   // At scale > 1: the per-pixel median over the images of each image's block mean (analysis
   // size; a block mean keeps an edge where it is, a block maximum moves it); else empty.
   cv::Mat small_block_median;
+  // The per-pixel lower quartile over the images (of the block means at scale > 1, of the
+  // pixels at scale 1), analysis size. Light only adds, so what glows under a few of the
+  // lights (a glass ball's refracted hot spot under lights near the camera's axis, spread over
+  // its limb) rises above it only where it glows in more than three quarters of the images.
+  cv::Mat small_lower_quartile;
   cv::Mat reference;  // CV_32F photo size, or empty
   bool srgb = true;   // the samples are sRGB-encoded (else linear)
   [[nodiscard]] float at(int i, int x, int y) const {

@@ -67,6 +67,7 @@ Evidence gather(const Source& src, int max_side) {
   });
   ev.small_max = cv::Mat(ev.sh, ev.sw, CV_32F);
   ev.small_median = cv::Mat(ev.sh, ev.sw, CV_32F);
+  ev.small_lower_quartile = cv::Mat(ev.sh, ev.sw, CV_32F);
   tbb::parallel_for(0, ev.sh, [&](int y) {
     std::vector<float> v(static_cast<std::size_t>(ev.n));
     for (int x = 0; x < ev.sw; ++x) {
@@ -74,6 +75,10 @@ Evidence gather(const Source& src, int max_side) {
       ev.small_max.at<float>(y, x) = *std::max_element(v.begin(), v.end());
       std::nth_element(v.begin(), v.begin() + ev.n / 2, v.end());
       ev.small_median.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 2)];
+      if (ev.scale == 1) {
+        std::nth_element(v.begin(), v.begin() + ev.n / 4, v.begin() + ev.n / 2);
+        ev.small_lower_quartile.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 4)];
+      }
     }
   });
   cv::resize(ev.full_mean, ev.small_mean, cv::Size(ev.sw, ev.sh), 0, 0, cv::INTER_AREA);
@@ -93,6 +98,8 @@ Evidence gather(const Source& src, int max_side) {
         }
         std::nth_element(v.begin(), v.begin() + ev.n / 2, v.end());
         ev.small_block_median.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 2)];
+        std::nth_element(v.begin(), v.begin() + ev.n / 4, v.begin() + ev.n / 2);
+        ev.small_lower_quartile.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 4)];
       }
     });
   }

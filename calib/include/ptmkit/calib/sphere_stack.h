@@ -7,9 +7,12 @@
 //   per image   an analysis copy of its luma, each pixel the maximum of a block of
 //               `scale` x `scale` photo pixels (highlights survive the reduction); scale is
 //               the smallest integer that brings the longest side to analysis_max_side_px
-//   per pixel   over the stack: maximum, mean and median (median on the analysis copy);
-//               what stays still (the sphere, its base, the scene and its reflections) is in
-//               the median, what moves with the light is not
+//   per pixel   over the stack: maximum, mean, median and lower quartile (the last two on
+//               the analysis copy); what stays still (the sphere, its base, the scene and its
+//               reflections) is in the median, what moves with the light is not; the lower
+//               quartile also leaves out a glow that covers part of the sphere in up to three
+//               quarters of the images (a glass ball's refracted hot spot under high lights),
+//               and its rim is taken where it is the sharper
 //   moving spots  per image, the connected spots brighter than the median by a margin
 // Sphere candidates: circles (OpenCV Hough gradient) on contrast-stretched composites (max,
 // mean, median, the reference photo), each refined on the rim's edge, then scored:
