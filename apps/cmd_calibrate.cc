@@ -236,7 +236,7 @@ void run_sphere(const SphereArgs& args) {
     std::printf("  light %s: origin at %s\n", report.near_scale_free ? "directions" : "positions",
                 report.origin.c_str());
   }
-  if (!report.near && report.spheres.size() >= 2 && 2 * report.outliers() > report.usable()) {
+  if (!report.near && report.spheres.size() >= 2 && report.most_lights_outliers()) {
     std::printf(
         "  most lights disagree between the spheres: near lights? (give --sphere-radius-mm "
         "and --focal-px to triangulate their positions)\n");

@@ -142,6 +142,8 @@ int RigReport::outliers() const {
                                         [](const RigLight& l) { return l.found && l.outlier; }));
 }
 
+bool RigReport::most_lights_outliers() const { return 2 * outliers() > usable(); }
+
 RigReport calibrate_rig(const std::vector<Image>& images,
                         const std::vector<std::filesystem::path>& names,
                         const RigOptions& options) {
@@ -463,7 +465,7 @@ RigReport refine_rig(std::vector<SphereReport> spheres,
                            !options.plane;
   if (!may_be_near) return refine_rig_model(std::move(spheres), names, w, h, options);
   RigReport distant = refine_rig_model(spheres, names, w, h, options);
-  if (2 * distant.outliers() <= distant.usable()) return distant;
+  if (!distant.most_lights_outliers()) return distant;
   RigOptions near_options = options;
   near_options.sphere_radius_mm = 1.0;  // distances in units of the sphere radius
   RigReport near = refine_rig_model(std::move(spheres), names, w, h, near_options);

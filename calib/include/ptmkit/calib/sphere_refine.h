@@ -126,6 +126,9 @@ struct RigReport {
 
   [[nodiscard]] int usable() const;
   [[nodiscard]] int outliers() const;
+  // More than half of the usable lights are outliers: the spheres see most lights along
+  // different directions (near lights taken as distant, or circles that are not spheres).
+  [[nodiscard]] bool most_lights_outliers() const;
   [[nodiscard]] std::string to_json() const;
 };
 
