@@ -2,7 +2,17 @@
 // project writes; the first byte picks the extension (readers are chosen by it first).
 #include "fuzz_util.h"
 #include "ptmkit/core/image_io.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/core/stack_reader.h"
+
+// Decoding is the cost here, and it grows with the pixels an input declares. Under the
+// sanitizers a decode near the other targets' 1 GiB budget takes seconds (ten and more on a
+// loaded machine), which would read as a timeout; a 256 MiB budget keeps every unit short.
+// The readers' refusals past the budget are exercised the same way.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  ptmkit::set_memory_budget_bytes(std::uint64_t{256} << 20);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

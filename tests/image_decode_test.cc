@@ -12,6 +12,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/image_io.h"
 #include "ptmkit/core/light_set.h"
+#include "ptmkit/core/limits.h"
 #include "ptmkit/core/stack_reader.h"
 #include "ptmkit/texture/ptm.h"
 #include "test_util.h"
@@ -303,6 +304,134 @@ TEST(ImageDecode, TruncatedJpegIsAnErrorUnlessDamageIsAllowed) {
   EXPECT_THROW((void)read_stack({dir / "cut.jpg"}), Error);
   const Image repaired = read_image(dir / "cut.jpg", {.allow_damaged = true});
   EXPECT_EQ(repaired.width(), 64);
+}
+
+// Images read through OpenImageIO are decoded a megabyte of rows at a time and handed out in
+// the stack reader's bands: an image (planes stored separately, a layout the direct TIFF
+// reader leaves to OpenImageIO) whose chunks end inside bands reads exactly what
+// OpenImageIO gives for the whole image.
+TEST(ImageDecode, RowsReadThroughOpenImageIOInChunksMatchItsWholeImage) {
+  test::ScratchDir dir;
+  const fs::path p = dir / "tall.tif";
+  const int w = 300;
+  const int h = 2500;  // 900 bytes a row: chunks of 1165 rows, not a multiple of 64
+  {
+    auto out = OIIO::ImageOutput::create(p.string());
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("tiff:planarconfig", "separate");
+    spec.attribute("compression", "none");
+    ASSERT_TRUE(out->open(p.string(), spec));
+    std::vector<std::uint8_t> px(static_cast<std::size_t>(w) * h * 3);
+    for (std::size_t k = 0; k < px.size(); ++k) px[k] = static_cast<std::uint8_t>(k * 7 + k / 97);
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    ASSERT_TRUE(out->close());
+  }
+  int rw = 0, rh = 0, rc = 0;
+  const std::vector<double> ref = oiio_samples(p, PixelFormat::kU8, &rw, &rh, &rc);
+  const std::vector<Image> stack = read_stack({p});
+  ASSERT_EQ(stack.size(), 1u);
+  ASSERT_EQ(stack[0].width(), w);
+  ASSERT_EQ(stack[0].height(), h);
+  ASSERT_EQ(ref.size(), static_cast<std::size_t>(w) * h * 3);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    differ += std::round(double(stack[0].data()[i]) * 255.0) != ref[i];
+  }
+  EXPECT_EQ(differ, 0u);
+}
+
+// A progressive JPEG written by OpenImageIO (libjpeg's standard progression: 10 scans).
+std::string progressive_jpeg(const fs::path& p, const Image& img) {
+  auto out = OIIO::ImageOutput::create(p.string());
+  OIIO::ImageSpec spec(img.width(), img.height(), img.channels(), OIIO::TypeDesc::UINT8);
+  spec.attribute("jpeg:progressive", 1);
+  if (!out || !out->open(p.string(), spec) ||
+      !out->write_image(OIIO::TypeDesc::FLOAT, img.data()) || !out->close()) {
+    return {};
+  }
+  return slurp(p);
+}
+
+// The frame header's height and width (bytes 5-8 after the SOF marker) set to w x h.
+void set_frame_size(std::string* jpeg, std::size_t sof, int w, int h) {
+  (*jpeg)[sof + 5] = static_cast<char>(h >> 8);
+  (*jpeg)[sof + 6] = static_cast<char>(h & 0xFF);
+  (*jpeg)[sof + 7] = static_cast<char>(w >> 8);
+  (*jpeg)[sof + 8] = static_cast<char>(w & 0xFF);
+}
+
+// A JPEG of several scans is decoded into a buffer of all its coefficients (128 bytes per
+// block and component) before its first row: libjpeg would allocate 2.7 GB for a 521-byte
+// file declaring 30000 x 30000 (4:2:0). What the file can hold, the memory available and the number
+// of scans are checked first, and a cut-short file stops at the damage.
+TEST(ImageDecode, JpegOfSeveralScansIsBoundedBeforeDecoding) {
+  test::ScratchDir dir;
+  const std::string bytes = progressive_jpeg(dir / "prog.jpg", pattern(64, 48, 3));
+  const std::size_t sof = bytes.find("\xFF\xC2");
+  ASSERT_NE(sof, std::string::npos) << "OpenImageIO did not write a progressive JPEG";
+  EXPECT_EQ(read_image(dir / "prog.jpg").width(), 64);
+
+  // Huffman-coded: every block takes at least a bit in its DC scan.
+  std::string huge = bytes;
+  set_frame_size(&huge, sof, 30000, 30000);
+  spit(dir / "huge.jpg", huge);
+  try {
+    (void)read_image(dir / "huge.jpg");
+    FAIL() << "a 30000 x 30000 progressive JPEG in " << huge.size() << " bytes was accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("huge.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("cannot hold"));
+  }
+
+  // Arithmetic-coded (SOF10): no bound from the file's size; the coefficient buffer is
+  // checked against the memory available (here capped at 512 MiB).
+  std::string arith = huge;
+  arith[sof + 1] = static_cast<char>(0xCA);
+  spit(dir / "arith.jpg", arith);
+  set_memory_budget_bytes(std::uint64_t{512} << 20);
+  try {
+    (void)read_image(dir / "arith.jpg");
+    ADD_FAILURE() << "a 30000 x 30000 coefficient buffer was allocated past the budget";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("arith.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("coefficients of this 30000x30000 JPEG"));
+  }
+  set_memory_budget_bytes(0);
+
+  // Cut short: an error at the damage unless damage is allowed.
+  spit(dir / "cut.jpg", bytes.substr(0, bytes.size() / 2));
+  try {
+    (void)read_image(dir / "cut.jpg");
+    FAIL() << "truncated progressive JPEG accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("cut.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("damaged"));
+  }
+  EXPECT_EQ(read_image(dir / "cut.jpg", {.allow_damaged = true}).width(), 64);
+
+  // 600 more copies of the last scan (before the end-of-image marker): past the scan limit,
+  // even where damage (this is a bogus progression) is allowed.
+  const std::size_t last_scan = bytes.rfind("\xFF\xDA");
+  const std::size_t eoi = bytes.rfind("\xFF\xD9");
+  ASSERT_NE(last_scan, std::string::npos);
+  ASSERT_NE(eoi, std::string::npos);
+  ASSERT_LT(last_scan, eoi);
+  std::string many = bytes.substr(0, eoi);
+  for (int k = 0; k < 600; ++k) many += bytes.substr(last_scan, eoi - last_scan);
+  many += bytes.substr(eoi);
+  spit(dir / "scans.jpg", many);
+  for (const bool allow : {false, true}) {
+    try {
+      (void)read_image(dir / "scans.jpg", {.allow_damaged = allow});
+      ADD_FAILURE() << "a JPEG of 610 scans was accepted (damage allowed: " << allow << ")";
+    } catch (const Error& e) {
+      EXPECT_THAT(e.what(), HasSubstr("scans.jpg"));
+      if (allow) {
+        EXPECT_THAT(e.what(), HasSubstr("more than 500 scans"));
+      }
+    }
+  }
 }
 
 // A layout the direct TIFF reader leaves to OpenImageIO (planes stored separately), its last

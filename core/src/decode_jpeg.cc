@@ -2,6 +2,7 @@
 // IDCT, fancy upsampling), which is what OpenImageIO's JPEG reader uses, so the decoded bytes
 // are the ones OpenImageIO gave (checked by a test where OpenImageIO is available).
 #include <csetjmp>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -10,6 +11,7 @@
 
 #include "decoder.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/limits.h"
 
 namespace fs = std::filesystem;
 
@@ -24,6 +26,35 @@ struct JpegErrors {
   char warning[JMSG_LENGTH_MAX];
   int warnings = 0;
 };
+
+// Scans one progressive JPEG may have. Each scan walks the whole coefficient buffer, so a
+// small file of many near-empty scans costs time out of all proportion to its size. Libjpeg's
+// standard progression has 10 scans; libjpeg-turbo's own tools offer a cut-off like this one.
+constexpr int kMaxJpegScans = 500;
+
+struct JpegProgress {
+  jpeg_progress_mgr pub;
+  JpegErrors* errors = nullptr;
+  // Where damaged data is an error, decoding stops at the first warning: a JPEG of several
+  // scans is otherwise read to its end (libjpeg completes a cut-short file with empty scans)
+  // before jpeg_start_decompress returns and the warning can be seen.
+  bool stop_at_warning = false;
+  bool stopped_at_warning = false;
+};
+
+void on_progress(j_common_ptr cinfo) {
+  auto* p = reinterpret_cast<JpegProgress*>(cinfo->progress);
+  if (p->stop_at_warning && p->errors->warnings > 0) {
+    p->stopped_at_warning = true;
+    std::longjmp(p->errors->jump, 1);
+  }
+  const int scan = reinterpret_cast<j_decompress_ptr>(cinfo)->input_scan_number;
+  if (scan > kMaxJpegScans) {
+    std::snprintf(p->errors->error, sizeof(p->errors->error),
+                  "more than %d scans (a standard progressive JPEG has 10)", kMaxJpegScans);
+    std::longjmp(p->errors->jump, 1);
+  }
+}
 
 [[noreturn]] void on_error(j_common_ptr cinfo) {
   auto* e = reinterpret_cast<JpegErrors*>(cinfo->err);
@@ -58,8 +89,42 @@ class JpegDecoder final : public Decoder {
     cinfo_.err = jpeg_std_error(&errors_.pub);
     errors_.pub.error_exit = on_error;
     errors_.pub.emit_message = on_message;
+    progress_.pub.progress_monitor = on_progress;
+    progress_.errors = &errors_;
+    progress_.stop_at_warning = !settings_.allow_damaged;
     if (!start()) fail("cannot read JPEG header");
     check_dimensions(path_, cinfo_.image_width, cinfo_.image_height, cinfo_.num_components);
+    // A progressive Huffman-coded JPEG codes every block of a component in that component's
+    // first DC scan, in at least one bit.
+    if (cinfo_.progressive_mode && !cinfo_.arith_code) {
+      const jpeg_component_info& c = cinfo_.comp_info[0];
+      const std::uintmax_t blocks =
+          static_cast<std::uintmax_t>(c.width_in_blocks) * c.height_in_blocks;
+      if (file_bytes < blocks / 8) {
+        throw Error(where(path_) + ": declares " + std::to_string(cinfo_.image_width) + "x" +
+                    std::to_string(cinfo_.image_height) + " pixels but its " +
+                    std::to_string(file_bytes) + " bytes cannot hold that many (at least " +
+                    std::to_string(blocks / 8) + " needed)");
+      }
+    }
+    // A JPEG of several scans (progressive, or components in separate scans) is decoded into
+    // a buffer of every coefficient of the image before the first row comes out: 128 bytes
+    // per 8x8 block of each component, which libjpeg allocates in jpeg_start_decompress.
+    if (jpeg_has_multiple_scans(&cinfo_)) {
+      std::uint64_t bytes = 0;
+      for (int k = 0; k < cinfo_.num_components; ++k) {
+        const jpeg_component_info& c = cinfo_.comp_info[k];
+        const std::uint64_t across =
+            (c.width_in_blocks + c.h_samp_factor - 1ULL) / c.h_samp_factor * c.h_samp_factor;
+        const std::uint64_t down =
+            (c.height_in_blocks + c.v_samp_factor - 1ULL) / c.v_samp_factor * c.v_samp_factor;
+        bytes += across * down * sizeof(JBLOCK);
+      }
+      check_allocation(path_, bytes,
+                       "the coefficients of this " + std::to_string(cinfo_.image_width) + "x" +
+                           std::to_string(cinfo_.image_height) +
+                           " JPEG of several scans (decoded whole before its first row)");
+    }
     // A Huffman-coded sequential JPEG spends at least 2 bits (a DC code and an end-of-block
     // code) on each 8x8 luminance block; a file too short for that declares more than it holds.
     if (!cinfo_.progressive_mode && !cinfo_.arith_code) {
@@ -147,6 +212,7 @@ class JpegDecoder final : public Decoder {
     if (setjmp(errors_.jump) != 0) return false;
     jpeg_create_decompress(&cinfo_);
     created_ = true;
+    cinfo_.progress = &progress_.pub;
     jpeg_stdio_src(&cinfo_, file_);
     jpeg_save_markers(&cinfo_, JPEG_APP0 + 1, 0xFFFF);
     jpeg_save_markers(&cinfo_, JPEG_APP0 + 2, 0xFFFF);
@@ -168,6 +234,9 @@ class JpegDecoder final : public Decoder {
     return true;
   }
   [[noreturn]] void fail(const char* what) {
+    // Stopped by on_progress at a warning: the error is the damaged data (check_warnings
+    // throws, as damage is not allowed where decoding stops at it).
+    if (progress_.stopped_at_warning) check_warnings();
     throw Error(where(path_) + ": " + what + ": " + excerpt(errors_.error));
   }
   void check_warnings() {
@@ -184,6 +253,7 @@ class JpegDecoder final : public Decoder {
   JDIMENSION skip_left_ = 0;
   jpeg_decompress_struct cinfo_;
   JpegErrors errors_{};
+  JpegProgress progress_{};
   std::FILE* file_ = nullptr;
   bool created_ = false;
   bool warned_ = false;
