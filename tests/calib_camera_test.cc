@@ -92,6 +92,7 @@ const std::vector<Image>& views() {
 }
 
 TEST(CalibCamera, RecoversTheFocalLengthFromEightViews) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const TagBoard board = test_board();
   const synth::PinholeCamera truth = true_camera();
   const CameraReport report = calibrate_camera(views(), {}, board);
@@ -121,6 +122,7 @@ TEST(CalibCamera, RecoversTheFocalLengthFromEightViews) {
 // 0): the sixth-order term is not identifiable from a board that stays off the image
 // corners, which is why CameraCalibrationOptions::fix_k3 defaults to true.
 TEST(CalibCamera, FreeK3GivesNoBetterFocalLength) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const synth::PinholeCamera truth = true_camera();
   CameraCalibrationOptions free_k3;
   free_k3.fix_k3 = false;

@@ -727,6 +727,7 @@ TEST(CalibSphereStack, OneGlassMarbleHasEveryLight) {
 // two marbles settle which spot is each light's reflection no light is left doubtful; black
 // glossy spheres (no second spots) and chrome ones are mirrors.
 TEST(CalibSphereStack, SphereMaterialDecidedFromTheSecondSpots) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoImages glass = render_photo("photo-glass", kEightLights);
   const StackCalibration g = calibrate_photo(glass, 2);
   std::printf("photo-glass: %s, %s\n", to_string(g.material), g.material_note.c_str());
@@ -790,6 +791,7 @@ void check_light(const std::string& preset, std::uint64_t seed, int target, cons
 // (Seed 2: the light at elevation 15 degrees facing the spheres' tops, the preset's own
 // light 3, is mirrored beside a window on both spheres.)
 TEST(CalibSphereStack, ACoreOnAWindowsBlurredRimIsCutFromTheWindow) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   check_light("photo-chrome", 2, 1, "core on a window's rim", kOnAWindowsEdgeHighlightPx);
 }
 
@@ -798,6 +800,7 @@ TEST(CalibSphereStack, ACoreOnAWindowsBlurredRimIsCutFromTheWindow) {
 // the lift in linear light and without clipped pixels; on the sRGB-encoded lift the halo over
 // the window looks weaker and the centre moves away from it.
 TEST(CalibSphereStack, AHaloOverAMirroredWindowIsMeasuredInLinearLight) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   check_light("photo-dome", 2, 1, "halo over a mirrored window", kHaloOverAWindowPx);
 }
 
@@ -895,6 +898,7 @@ TEST(CalibSphereStack, ALampLiftedToTheClipByTheLightsGlowIsNotTheCore) {
 // taken and the light dropped as "not a compact highlight"; on glass a compact component is
 // preferred.
 TEST(CalibSphereStack, GlassUnderALightAboveTheCameraKeepsItsReflection) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoImages p = render_photo("photo-glass", "rings:15:3,40:3,65:2,75:2,90:1", 4);
   const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
@@ -928,6 +932,7 @@ synth::PhotoOptions glass_photo_options(const std::string& lights, int width, in
 // degrees off); and a piece of the glow, far larger than any reflection's core, can be the
 // spot that agrees better with the other marble's at the coarse scale (taken, 43 degrees off).
 TEST(CalibSphereStack, AReflectionInTheGlowOfTheHotSpotIsFoundAndCentredOnTheRamp) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   test::ScratchDir dir;
   const synth::PhotoOptions po = glass_photo_options("rings:15:4,40:4,84:4", 1280, 720);
   const std::vector<fs::path> photos = render_photo_files(po, dir.path());
@@ -996,6 +1001,7 @@ void expect_photo_targets(const synth::PhotoOptions& po, const std::string& labe
 // and every light it sees a few tenths of a degree off. The lower quartile of the stack keeps
 // the rim sharp.
 TEST(CalibSphereStack, GlassRimsUnderFewLightsAreTakenWhereTheGlowLeavesThemSharp) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   expect_photo_targets(glass_photo_options("rings:15:3,40:3,65:2,80:4", 1280, 720),
                        "glass under 12 lights");
 }
@@ -1005,6 +1011,7 @@ TEST(CalibSphereStack, GlassRimsUnderFewLightsAreTakenWhereTheGlowLeavesThemShar
 // lies a few pixels outside the outline (circles 0.17-0.32 px off, lights 0.31 degrees mean).
 // The maximum, where the lights lit those surroundings, shows the rim on more rays and is taken.
 TEST(CalibSphereStack, TheRimIsTakenFromTheCompositeThatShowsItOnMostRays) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   synth::PhotoOptions po = synth::photo_preset_options("photo-dome");
   po.lights = "rings:15:4,40:4,75:6,84:4";
   po.seed = 2;
@@ -1017,6 +1024,7 @@ TEST(CalibSphereStack, TheRimIsTakenFromTheCompositeThatShowsItOnMostRays) {
 // a piece of the hot spot's glow at the rim does at 4608 x 2592, where the light was lost).
 // The next clipped component of the window is tried, and the reflection found.
 TEST(CalibSphereStack, GlassTriesTheNextClippedSpotWhenTheFirstReflectsBelowThePlane) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p = render_photo("photo-glass", "rings:15:3,40:3,65:2,75:2,90:1", 4);
   const std::size_t zenith = p.truth.light_dirs.size() - 1;
   ASSERT_GT(p.truth.light_dirs[zenith].z(), 0.999);
@@ -1073,6 +1081,7 @@ void check_circles_at_scale_2(const PhotoImages& p, int spheres, const char* lab
 // glass ball's caustics and hot spots beside its limb pulled the rim (at 1600 x 900, 1.9 and
 // 1.1 px off). The rim is checked against the median of the block means at the analysis size.
 TEST(CalibSphereStack, GlassRimsAtPhotoSizeAreCheckedAgainstTheBlockMedian) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   check_circles_at_scale_2(render_photo("photo-glass", "rings:15:4,35:4,55:4,75:2", 4), 2, "glass");
 }
 
@@ -1089,6 +1098,7 @@ TEST(CalibSphereStack, ALargeSphereAtPhotoSizeKeepsItsPhotoSizeRim) {
 // length the outline is fitted as the tangent cone it is. At 1280 x 720 (scale 2), where the
 // circle was 0.26-0.29 px off and its radius 0.12-0.15% short:
 TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoImages p = render_photo("photo-dome", "rings:15:4,40:4", 1, 0, 1280, 720);
   StackCalibrationOptions o;
   o.rig.sphere_count = 2;

@@ -10,6 +10,24 @@
 
 namespace ptmkit::test {
 
+// Whether this is the AddressSanitizer + UBSan build (scripts/test.sh --sanitize).
+#ifdef PTMKIT_SANITIZED_BUILD
+inline constexpr bool kSanitizedBuild = true;
+#else
+inline constexpr bool kSanitizedBuild = false;
+#endif
+
+// The first statement of an accuracy test on a large render (a full calibration of a
+// photo-size capture): under the sanitizers each takes minutes, so they run in the release
+// build only, and the sanitizer build checks the same calibration code on the suite's smaller
+// renders.
+#define PTMKIT_RELEASE_BUILD_ONLY()                                                    \
+  do {                                                                                 \
+    if (::ptmkit::test::kSanitizedBuild) {                                             \
+      GTEST_SKIP() << "accuracy on a large render: checked in the release build only"; \
+    }                                                                                  \
+  } while (false)
+
 // A fresh empty folder for the current test, removed at destruction unless PTMKIT_KEEP_TMP is
 // set in the environment.
 class ScratchDir {

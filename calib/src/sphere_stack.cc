@@ -92,15 +92,27 @@ struct Symmetry {
   bool ok = false;
 };
 
+// The Gauss-Newton step of the first N unknowns from the normal equations; false where they
+// are singular (a flat window: no slope to find).
+template <int N>
+bool normal_step(const Eigen::Matrix4d& jtj, const Eigen::Vector4d& jtr, Eigen::Vector4d* step) {
+  const Eigen::Matrix<double, N, N> a = jtj.topLeftCorner<N, N>();
+  const Eigen::FullPivLU<Eigen::Matrix<double, N, N>> lu(a);
+  if (lu.rank() < N || std::abs(a.determinant()) < 1e-12) return false;
+  step->setZero();
+  step->head<N>() = -lu.solve(jtr.head<N>());
+  return true;
+}
+
 // Gauss-Newton on the residuals above over `pts`, for the centre alone or (with_slope) the
 // centre and the slope; the centre moves at most half a pixel a step (the linearisation
 // holds that far) and at most `max_shift` from `start` (else not ok).
 Symmetry fit_symmetry(const cv::Mat& lift, const std::vector<Eigen::Vector2d>& pts,
                       const Eigen::Vector2d& start, double max_shift, bool with_slope,
                       const std::function<bool(int, int)>& inside_win) {
-  const int n = with_slope ? 4 : 2;
   Symmetry s;
   s.centre = start;
+  bool settled = false;
   for (int it = 0; it <= 20; ++it) {
     Eigen::Matrix4d jtj = Eigen::Matrix4d::Zero();
     Eigen::Vector4d jtr = Eigen::Vector4d::Zero();
@@ -131,18 +143,15 @@ Symmetry fit_symmetry(const cv::Mat& lift, const std::vector<Eigen::Vector2d>& p
     s.sum_sq = sum_sq;
     s.used = used;
     if (used < 12) return s;
-    if (it == 20) break;
-    const Eigen::MatrixXd a = jtj.topLeftCorner(n, n);
-    const Eigen::FullPivLU<Eigen::MatrixXd> lu(a);
-    if (lu.rank() < n || std::abs(a.determinant()) < 1e-12) return s;  // flat: no slope
-    Eigen::Vector4d step = Eigen::Vector4d::Zero();
-    step.head(n) = -lu.solve(jtr.head(n));
+    if (settled || it == 20) break;  // the residuals above are the final centre's
+    Eigen::Vector4d step;
+    if (!(with_slope ? normal_step<4>(jtj, jtr, &step) : normal_step<2>(jtj, jtr, &step))) {
+      return s;
+    }
     s.centre += step.head<2>().cwiseMax(-0.5).cwiseMin(0.5);
     s.slope += step.tail<2>();
     if ((s.centre - start).norm() > max_shift) return s;
-    if (step.head<2>().norm() < 1e-4) {
-      it = 19;  // one more pass for the residuals at the final centre
-    }
+    settled = step.head<2>().norm() < 1e-4;  // one more pass for the final residuals
   }
   s.ok = true;
   return s;
@@ -747,6 +756,13 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     const OutlinePlane photo_plane(det.camera, ev.w, ev.h, 1);
     const OutlinePlane small_plane(det.camera, ev.w, ev.h, ev.scale);
     for (const Circle& c : small) {
+      // A rim circle stands for the candidate when its centre and radius each lie within 5% of
+      // the radius (plus an analysis pixel) of the candidate's.
+      const auto near_candidate = [&](const Circle& r) {
+        const double tol = 0.05 * c.radius_px + ev.scale;
+        return (r.centre_px - c.centre_px).norm() < tol &&
+               std::abs(r.radius_px - c.radius_px) < tol;
+      };
       Circle best = c;
       double best_rim = 0.0, best_tight = 0.0;
       // Of the composites' rims the best supported (on equal support the first: what holds
@@ -762,9 +778,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         for (const auto& [name, plane] : planes) {
           double rim = 0.0, tight = 0.0;
           const Circle r = rim_circle(*plane, logarithm, c, photo_plane, &rim, &tight);
-          if (rim > best_rim &&
-              (r.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
-              std::abs(r.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale) {
+          if (rim > best_rim && near_candidate(r)) {
             best_rim = rim;
             best_tight = tight;
             best = r;
@@ -784,15 +798,13 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         double rim = 0.0, tight = 0.0;
         bool found = false;
       };
-      auto still_rim = [&](const cv::Mat& plane, const OutlinePlane& op, bool near_candidate) {
+      auto still_rim = [&](const cv::Mat& plane, const OutlinePlane& op, bool must_be_near) {
         StillRim sr;
         for (const bool logarithm : {false, true}) {
           const Circle r = rim_circle(plane, logarithm, cs, op, &sr.rim, &sr.tight);
           if (sr.rim < 0.3) continue;
           sr.circle = to_photo(r, ev.scale);
-          sr.found = !near_candidate ||
-                     ((sr.circle.centre_px - c.centre_px).norm() < 0.05 * c.radius_px + ev.scale &&
-                      std::abs(sr.circle.radius_px - c.radius_px) < 0.05 * c.radius_px + ev.scale);
+          sr.found = !must_be_near || near_candidate(sr.circle);
           break;
         }
         return sr;
@@ -802,8 +814,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       // rim there into a ramp (rings:15:3,40:3,65:2,80:4 at 1280 x 720: 0.66-0.69 px off on
       // one marble). The lower quartile keeps the rim sharp where the glow does not cover it
       // in most images; it is taken where more rays' edges lie within kTightRimPx of its
-      // circle than of the one chosen above (the median's at scale 1, the block median's
-      // below).
+      // circle than of the one chosen above (at scale 1, the best-supported composite's; at
+      // scale > 1, the block median's, below).
       const StillRim lower = still_rim(ev.small_lower_quartile, small_plane, true);
       if (ev.scale == 1) {
         if (lower.found && lower.tight > best_tight) best = lower.circle;
