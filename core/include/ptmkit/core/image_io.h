@@ -16,6 +16,9 @@
 // limits below (and, for JPEG and PNG, against what the file's size can hold) before any pixel
 // memory is allocated, and a decoder's warning about damaged data (a truncated JPEG, corrupt
 // entropy-coded data, a bad PNG checksum) is an error unless ImageReadOptions::allow_damaged.
+// A JPEG of several scans (progressive) is decoded into a buffer of all its coefficients
+// before its first row: that buffer is checked against the memory available first, more than
+// 500 scans are an error, and where damage is an error decoding stops at the first warning.
 #pragma once
 
 #include <filesystem>
