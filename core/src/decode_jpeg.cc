@@ -82,6 +82,16 @@ class JpegDecoder final : public Decoder {
   JpegDecoder(const JpegDecoder&) = delete;
   JpegDecoder& operator=(const JpegDecoder&) = delete;
 
+  // A file shorter than the fewest bytes its declared pixels can be coded in is refused before
+  // decoding: libjpeg would otherwise decode it to its declared size, filling what is missing.
+  void require_bytes(std::uintmax_t file_bytes, std::uintmax_t needed) const {
+    if (file_bytes >= needed) return;
+    throw Error(where(path_) + ": declares " + std::to_string(cinfo_.image_width) + "x" +
+                std::to_string(cinfo_.image_height) + " pixels but its " +
+                std::to_string(file_bytes) + " bytes cannot hold that many (at least " +
+                std::to_string(needed) + " needed)");
+  }
+
   // Returns false for colour models the direct path does not convert (CMYK, YCCK).
   bool open(std::uintmax_t file_bytes) {
     file_ = std::fopen(path_.c_str(), "rb");
@@ -100,12 +110,7 @@ class JpegDecoder final : public Decoder {
       const jpeg_component_info& c = cinfo_.comp_info[0];
       const std::uintmax_t blocks =
           static_cast<std::uintmax_t>(c.width_in_blocks) * c.height_in_blocks;
-      if (file_bytes < blocks / 8) {
-        throw Error(where(path_) + ": declares " + std::to_string(cinfo_.image_width) + "x" +
-                    std::to_string(cinfo_.image_height) + " pixels but its " +
-                    std::to_string(file_bytes) + " bytes cannot hold that many (at least " +
-                    std::to_string(blocks / 8) + " needed)");
-      }
+      require_bytes(file_bytes, blocks / 8);
     }
     // A JPEG of several scans (progressive, or components in separate scans) is decoded into
     // a buffer of every coefficient of the image before the first row comes out: 128 bytes
@@ -130,12 +135,7 @@ class JpegDecoder final : public Decoder {
     if (!cinfo_.progressive_mode && !cinfo_.arith_code) {
       const std::uintmax_t blocks =
           ((cinfo_.image_width + 7ULL) / 8) * ((cinfo_.image_height + 7ULL) / 8);
-      if (file_bytes < blocks / 4) {
-        throw Error(where(path_) + ": declares " + std::to_string(cinfo_.image_width) + "x" +
-                    std::to_string(cinfo_.image_height) + " pixels but its " +
-                    std::to_string(file_bytes) + " bytes cannot hold that many (at least " +
-                    std::to_string(blocks / 4) + " needed)");
-      }
+      require_bytes(file_bytes, blocks / 4);
     }
     if (cinfo_.jpeg_color_space == JCS_CMYK || cinfo_.jpeg_color_space == JCS_YCCK) return false;
     if (cinfo_.num_components != 1 && cinfo_.num_components != 3) return false;
