@@ -44,6 +44,12 @@ void add_robust_flags(CLI::App* cmd, fit::RobustOptions* robust) {
          "Lambertian model are inliers again (0 = off). Higher: fewer, surer labels")
       ->default_str(grey_text(robust->keep_within * 255.0))
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--keep-within-fraction", robust->keep_within_fraction,
+                  "lambert: the keep window of --keep-within-grey is also at most this "
+                  "fraction of the texel's albedo, so a dark or intensity-normalised capture "
+                  "is labelled as at full exposure (0 = the grey levels alone)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_flag(
       "!--no-fill", robust->fill_rejected,
       "lambert: fit the polynomial to the inliers alone, instead of to every sample with the "

@@ -5,7 +5,8 @@
 // Usage: robust_quality SIZE [SOLVERS]   (SOLVERS: comma-separated, default
 //   ls,irls-huber,irls-tukey,trim,sign). Tuning overrides for experiments, from the
 //   environment: RK_HI (highlight_k), RK_SH (shadow_k), RK_MS (min_scale, grey levels),
-//   RK_DF (dark_fraction), RK_IT (max_iterations), RK_MI (min_inliers).
+//   RK_DF (dark_fraction), RK_IT (max_iterations), RK_MI (min_inliers), RK_KW (keep_within,
+//   grey levels), RK_KF (keep_within_fraction).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -17,6 +18,24 @@
 
 namespace ptmkit::fit {
 namespace {
+
+// The robust solvers' defaults, with the tuning overrides from the environment (above).
+RobustOptions robust_from_env() {
+  RobustOptions ro;
+  auto envd = [](const char* k, double d) {
+    const char* v = std::getenv(k);
+    return v ? std::atof(v) : d;
+  };
+  ro.highlight_k = envd("RK_HI", ro.highlight_k);
+  ro.shadow_k = envd("RK_SH", ro.shadow_k);
+  ro.min_scale = envd("RK_MS", ro.min_scale * 255) / 255;
+  ro.dark_fraction = envd("RK_DF", ro.dark_fraction);
+  ro.max_iterations = static_cast<int>(envd("RK_IT", ro.max_iterations));
+  ro.min_inliers = static_cast<int>(envd("RK_MI", ro.min_inliers));
+  ro.keep_within = envd("RK_KW", ro.keep_within * 255) / 255;
+  ro.keep_within_fraction = envd("RK_KF", ro.keep_within_fraction);
+  return ro;
+}
 
 void print_table(int size, const std::string& list) {
   for (const char* preset : {"default", "matte", "glossy", "tall", "ambient"}) {
@@ -60,17 +79,7 @@ void print_table(int size, const std::string& list) {
       if (b == std::string::npos) b = list.size();
       const Solver s = parse_solver(list.substr(a, b - a));
       a = b + 1;
-      RobustOptions ro;
-      auto envd = [](const char* k, double d) {
-        const char* v = std::getenv(k);
-        return v ? std::atof(v) : d;
-      };
-      ro.highlight_k = envd("RK_HI", ro.highlight_k);
-      ro.shadow_k = envd("RK_SH", ro.shadow_k);
-      ro.min_scale = envd("RK_MS", ro.min_scale * 255) / 255;
-      ro.dark_fraction = envd("RK_DF", ro.dark_fraction);
-      ro.max_iterations = static_cast<int>(envd("RK_IT", ro.max_iterations));
-      ro.min_inliers = static_cast<int>(envd("RK_MI", ro.min_inliers));
+      const RobustOptions ro = robust_from_env();
       const auto r = test::score_solver(stack, s, ro);
       if (s == Solver::kLS) ls_psnr = r.psnr_db;
       std::printf(
@@ -96,9 +105,59 @@ void print_lobe(int size, double ks, double exponent) {
   const auto stack = test::render_preset("default", size, ks, exponent);
   std::printf("broad lobe: %d px, ks %.2f, exponent %.1f\n", size, ks, exponent);
   for (const char* name : {"ls", "trim", "lambert", "qtrim", "robust"}) {
-    const auto r = test::score_solver(stack, parse_solver(name), RobustOptions{});
+    const auto r = test::score_solver(stack, parse_solver(name), robust_from_env());
     std::printf("%-10s normals %5.2f deg  psnr %6.2f  P/R lit %.3f/%.3f\n", name,
                 r.normals.mean_deg, r.psnr_db, r.outliers_lit.precision, r.outliers_lit.recall);
+  }
+}
+
+// test::render_ball (tests/support/synth_stack.h): normals of the kept samples against the
+// truth, over the ball and by the tilt of its normals.
+void print_ball(int size, double ks, double exponent, double cone_deg, double exposure) {
+  const test::BallStack st = test::render_ball(size, ks, exponent, cone_deg, exposure);
+  const Image& mask = st.mask;
+  const double r_ball = st.radius_px, c = 0.5 * (size - 1);
+  // The ball's texels by the tilt of their normal from the view axis.
+  struct Ring {
+    const char* name;
+    double lo_deg, hi_deg;
+    Image mask;
+  };
+  std::vector<Ring> rings = {
+      {"0-30", 0, 30, {}}, {"30-50", 30, 50, {}}, {"50-70", 50, 70, {}}, {"70+", 70, 90, {}}};
+  for (Ring& ring : rings) {
+    ring.mask = Image(size, size, 1);
+    for (int y = 0; y < size; ++y) {
+      for (int x = 0; x < size; ++x) {
+        const double rr = std::hypot(x - c, y - c) / r_ball;
+        const double tilt = rr < 1.0 ? std::asin(rr) * 180.0 / 3.14159265358979 : 90.0;
+        ring.mask.at(x, y, 0) =
+            mask.at(x, y, 0) > 0.5f && tilt >= ring.lo_deg && tilt < ring.hi_deg ? 1.0f : 0.0f;
+      }
+    }
+  }
+  std::printf("ball: %d px, ks %.2f, exponent %.1f, 96 lights within %.0f deg, exposure %.2f\n",
+              size, ks, exponent, cone_deg, exposure);
+  for (const char* name : {"ls", "trim", "lambert", "qtrim", "robust"}) {
+    fit::FitOptions fo;
+    fo.solver = parse_solver(name);
+    fo.robust = robust_from_env();
+    fo.robust.min_scale *= 255.0 / 65535.0;  // 16-bit samples, as a fit from the files takes
+    fo.residual_stats = false;
+    fit::FitOutputs out;
+    out.want_labels = true;
+    out.want_normals = true;
+    CoefficientMap map;
+    CoefficientMapSink sink(&map);
+    (void)fit::fit_images(st.observed, st.dirs, fo, sink, &out);
+    const eval::NormalError e = eval::normal_error(out.normals, st.scene.normals, &mask);
+    std::printf("%-10s normals mean %5.2f median %5.2f deg; by tilt", name, e.mean_deg,
+                e.median_deg);
+    for (const Ring& ring : rings) {
+      const eval::NormalError er = eval::normal_error(out.normals, st.scene.normals, &ring.mask);
+      std::printf(" %s %5.2f", ring.name, er.mean_deg);
+    }
+    std::printf("\n");
   }
 }
 
@@ -116,10 +175,24 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
+  if (argc >= 3 && std::string(argv[1]) == "ball") {
+    try {
+      ptmkit::fit::print_ball(std::atoi(argv[2]), argc > 3 ? std::atof(argv[3]) : 0.3,
+                              argc > 4 ? std::atof(argv[4]) : 10.0,
+                              argc > 5 ? std::atof(argv[5]) : 45.0,
+                              argc > 6 ? std::atof(argv[6]) : 1.0);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "robust_quality: %s\n", e.what());
+      return 1;
+    }
+    return 0;
+  }
   if (argc < 2 || argc > 3 || std::atoi(argv[1]) < 8) {
     std::fprintf(stderr,
                  "usage: robust_quality SIZE(>= 8 px) [SOLVERS]\n"
-                 "       robust_quality lobe SIZE [KS EXPONENT]   (default 0.25 8)\n");
+                 "       robust_quality lobe SIZE [KS EXPONENT]   (default 0.25 8)\n"
+                 "       robust_quality ball SIZE [KS EXPONENT CONE_DEG EXPOSURE]   (default 0.3 "
+                 "10 45 1)\n");
     return 2;
   }
   try {

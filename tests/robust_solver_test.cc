@@ -1,6 +1,7 @@
 // Robust per-texel solvers: quality against synth truth, labels, determinism, CLI, extremes.
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <ostream>
 #include <random>
 
@@ -321,6 +322,9 @@ TEST(RobustSolver, FillingAndKeepingCloseSamplesEachEarnTheirPlace) {
   RobustOptions bad;
   bad.keep_within = -1.0;
   EXPECT_FALSE(bad.validate().empty());
+  RobustOptions bad_fraction;
+  bad_fraction.keep_within_fraction = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(bad_fraction.validate().empty());
 }
 
 }  // namespace

@@ -201,6 +201,9 @@ struct OpenedSource {
   int full_height = 0;
   // Float files are not clipped at full scale (HDR): no sample is "saturated".
   bool unclipped = false;
+  // One quantisation step of the samples (normalised): 1/255 for 8-bit files and images in
+  // memory, 1/65535 for 16-bit and float files. The robust scale's floor is counted in it.
+  double grey_step = 1.0 / 255.0;
   BandSource next;
 };
 
@@ -235,6 +238,9 @@ FitReport fit_source(const Designs& designs, const LightModelSetup& light_model,
   if (source.unclipped) {
     run_options.robust.saturation_level = std::numeric_limits<double>::infinity();
   }
+  // RobustOptions::min_scale is in grey levels of 8-bit input: a 16-bit capture's noise floor
+  // is 257 times finer, and a floor of 8-bit steps would hide its outliers (dark captures most).
+  run_options.robust.min_scale *= source.grey_step * 255.0;
   const bool ptm = options.basis == Basis::kPtm;
   FitSetup setup;
   setup.options = &run_options;
@@ -344,6 +350,7 @@ FitReport fit_capture(const LightSet& lights, const FitOptions& options, Coeffic
     source.channels = reader.channels();
     source.colour_space = reader.info().colour_space;
     source.unclipped = reader.info().format == PixelFormat::kF32;
+    source.grey_step = reader.info().format == PixelFormat::kU8 ? 1.0 / 255.0 : 1.0 / 65535.0;
     source.next = [&](int rows, StackBand* band) {
       return reader.read_band(rows, band, BandStorage::kNative8);
     };

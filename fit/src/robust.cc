@@ -97,6 +97,9 @@ std::string RobustOptions::validate() const {
   if (!(keep_within >= 0.0) || !std::isfinite(keep_within)) {
     return "keep_within must be finite and >= 0 (0 = off)";
   }
+  if (!(keep_within_fraction >= 0.0) || !std::isfinite(keep_within_fraction)) {
+    return "keep_within_fraction must be finite and >= 0 (0 = off)";
+  }
   return {};
 }
 

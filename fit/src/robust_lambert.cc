@@ -14,20 +14,25 @@ using internal::Packed;
 using internal::unpack_symmetric;
 using internal::Vec6;
 
-// RobustOptions::keep_within: rejected, unclipped samples within keep_within of the
-// Lambertian model fitted on the settled inliers become inliers again.
+// RobustOptions::keep_within: rejected, unclipped samples within the keep window
+// (keep_within, at most keep_within_fraction of the texel's albedo) of the Lambertian model
+// fitted on the settled inliers become inliers again.
 void TexelSolver::Impl::keep_close(const double* value, const std::uint8_t* saturated,
                                    double* weights, SampleLabel* labels) {
   Eigen::Vector4d g;
   if (!lambert_fit(
           value, [&](int i) { return labels[i] == SampleLabel::kInlier; }, &g))
     return;
+  double window = opt.keep_within;
+  if (opt.keep_within_fraction > 0.0) {
+    window = std::min(window, opt.keep_within_fraction * g.head<3>().norm());
+  }
   for (int i = 0; i < n; ++i) {
     if (labels[i] == SampleLabel::kInlier || saturated[i] != 0) continue;
     // Only where the model says the light reaches the surface: an attached shadow's dark
     // sample matches the model's zero, but it carries no direction for the normal.
     const double direct = lambert_rows[static_cast<std::size_t>(i)].head<3>().dot(g.head<3>());
-    if (direct > 0.0 && std::abs(value[i] - lambert_shade(i, g)) <= opt.keep_within) {
+    if (direct > 0.0 && std::abs(value[i] - lambert_shade(i, g)) <= window) {
       labels[i] = SampleLabel::kInlier;
       weights[i] = 1.0;
     }

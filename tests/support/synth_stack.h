@@ -2,6 +2,7 @@
 // robust tests and bench/robust_quality).
 #pragma once
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,60 @@ inline SynthStack render_preset(const std::string& preset, int size, double ks =
     s.diffuse.push_back(std::move(r.diffuse));
   }
   return s;
+}
+
+// A glossy ball seen from above (orthographic, radius 0.45 of the frame, on flat ground) under
+// 96 distant lights on a 12 x 8 grid of a plane facing it, within cone_deg of the view axis,
+// rendered in 16 bits, linear, with noise of 20 16-bit levels: the layout of photometric-stereo
+// captures of a ball. exposure scales every value (intensity-normalised captures often sit at
+// a tenth of full scale). `mask` keeps the ball without its outermost 3% of radius, where the
+// height field's finite differences are not the sphere's normals.
+struct BallStack : SynthStack {
+  Image mask;
+  double radius_px = 0.0;
+};
+
+inline BallStack render_ball(int size, double ks, double exponent, double cone_deg,
+                             double exposure) {
+  synth::SynthOptions o = synth::preset_options("default");
+  o.width = size;
+  o.height = size;
+  o.write_truth = false;
+  o.material.ks = ks;
+  o.material.exponent = exponent;
+  o.sensor.bits = 16;
+  o.sensor.exposure = exposure;
+  o.sensor.noise_sigma_grey = 20.0;
+  const double t = std::tan(cone_deg * 3.14159265358979 / 180.0) / std::sqrt(2.0);
+  for (int j = 0; j < 8; ++j) {
+    for (int i = 0; i < 12; ++i) {
+      const double x = t * (-1.0 + 2.0 * i / 11.0), y = t * (-1.0 + 2.0 * j / 7.0);
+      o.light_dirs.push_back(Eigen::Vector3d(x, y, 1.0).normalized());
+    }
+  }
+  BallStack b;
+  b.radius_px = 0.45 * size;
+  const double c = 0.5 * (size - 1), r = b.radius_px;
+  std::vector<float> h(static_cast<std::size_t>(size) * static_cast<std::size_t>(size), 0.0f);
+  b.mask = Image(size, size, 1);
+  for (int y = 0; y < size; ++y) {
+    for (int x = 0; x < size; ++x) {
+      const double r2 = (x - c) * (x - c) + (y - c) * (y - c);
+      if (r2 < r * r) {
+        h[static_cast<std::size_t>(y) * static_cast<std::size_t>(size) +
+          static_cast<std::size_t>(x)] = static_cast<float>(std::sqrt(r * r - r2));
+      }
+      b.mask.at(x, y, 0) = r2 < 0.97 * 0.97 * r * r ? 1.0f : 0.0f;
+    }
+  }
+  b.scene = synth::scene_from_height(size, size, std::move(h), 0.6);
+  b.dirs = o.light_dirs;
+  for (std::size_t i = 0; i < b.dirs.size(); ++i) {
+    synth::RenderedLight rl = synth::render_light(b.scene, o, b.dirs[i], static_cast<int>(i));
+    b.observed.push_back(std::move(rl.observed));
+    b.diffuse.push_back(std::move(rl.diffuse));
+  }
+  return b;
 }
 
 struct SolverScores {

@@ -82,6 +82,9 @@ struct RobustOptions {
   // Robust scale: mad_factor * MAD of the residuals (1.4826 makes it the standard deviation
   // for Gaussian noise), never below min_scale: 8-bit noise and the polynomial's own misfit
   // are never smaller than about 2 grey levels, and a tiny scale would reject good samples.
+  // min_scale is counted in steps of 8-bit input: a fit from 16-bit or float files
+  // (fit_capture) multiplies it by 255 / 65535, 2 steps of 16 bits; images in memory
+  // (fit_images) are taken as 8-bit.
   double mad_factor = 1.4826;
   double min_scale = 2.0 / 255.0;
   // Loss widths in scales (the usual 95%-efficiency constants).
@@ -126,6 +129,16 @@ struct RobustOptions {
   // Chosen on the synth presets for label precision against truth PSNR (docs/SOLVERS.md, "Labels:
   // keeping samples close to the model").
   double keep_within = 17.0 / 255.0;
+  // lambert: the keep window is also at most keep_within_fraction of the texel's albedo (the
+  // Lambertian model's value with the light along the normal): the window is
+  // min(keep_within, keep_within_fraction * albedo). An absolute window alone keeps nearly
+  // every sample of a dark or intensity-normalised capture (16-bit photometric-stereo data
+  // often has its diffuse level at a tenth of full scale), so its broad specular lobes were
+  // never rejected; a relative one labels a capture the same at any exposure. 0 turns the
+  // relative bound off (the absolute window alone). 0.13 binds only below an albedo of 0.5
+  // (17 / 255 / 0.13), so the synth presets keep their labels; it is the smallest fraction
+  // that keeps label precision at 0.84 or more on every preset (docs/SOLVERS.md).
+  double keep_within_fraction = 0.13;
   // lambert: the polynomial is fitted to every sample, each rejected one replaced by the
   // Lambertian + ambient model's value (its diffuse estimate from the inliers), instead of to
   // the inliers alone, which leaves the polynomial free to swing where samples were rejected
