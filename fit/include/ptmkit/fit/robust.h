@@ -108,7 +108,7 @@ struct RobustOptions {
   // qtrim: per texel, the darkest dark_quantile of the samples (by labelling value) are
   // shadows and the brightest bright_quantile highlights, whatever their level (clipped
   // samples are highlights besides). The plain trimming that robust rules are measured
-  // against (docs/SOLVERS.md, "Broad unclipped lobes").
+  // against (docs/SOLVERS.md, "Glossy balls and broad lobes").
   double dark_quantile = 0.25;
   double bright_quantile = 0.10;
   // Iterations of IRLS / the sign rule (each a 6 x 6 solve); stops early when labels settle.
