@@ -32,6 +32,12 @@ void add_robust_flags(CLI::App* cmd, fit::RobustOptions* robust) {
                   "truth PSNR (docs/SOLVERS.md)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--min-inliers", robust->min_inliers,
+                  "robust solvers: the fewest samples a texel keeps; where a solver's labels "
+                  "would keep fewer, the texel keeps its earlier fit. With as many lights or "
+                  "fewer, nothing is rejected")
+      ->capture_default_str()
+      ->check(CLI::Range(6, 1 << 20));
   cmd->add_option("--dark-fraction", robust->dark_fraction,
                   "trim/sign/lambert: samples darker than this fraction of the texel's "
                   "75th-percentile sample are shadows")

@@ -6,7 +6,8 @@
 //   ls,irls-huber,irls-tukey,trim,sign). Tuning overrides for experiments, from the
 //   environment: RK_HI (highlight_k), RK_SH (shadow_k), RK_MS (min_scale, grey levels),
 //   RK_DF (dark_fraction), RK_IT (max_iterations), RK_MI (min_inliers), RK_KW (keep_within,
-//   grey levels), RK_KF (keep_within_fraction).
+//   grey levels), RK_KF (keep_within_fraction); RK_LIGHTS, the presets' light layout (as
+//   `ptmkit synth --lights`).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -39,7 +40,8 @@ RobustOptions robust_from_env() {
 
 void print_table(int size, const std::string& list) {
   for (const char* preset : {"default", "matte", "glossy", "tall", "ambient"}) {
-    const auto stack = test::render_preset(preset, size);
+    const char* layout = std::getenv("RK_LIGHTS");
+    const auto stack = test::render_preset(preset, size, -1.0, -1.0, layout ? layout : "");
     {
       // Oracle: weighted least squares on the truly good samples (lit, within 20 grey levels).
       const LightDesign design = LightDesign::build(stack.dirs);

@@ -161,5 +161,31 @@ TEST(CliFit, RidgeFitsASingleRingWhenAsked) {
   EXPECT_TRUE(report["design"]["single_ring"].get<bool>());
 }
 
+// A capture with no more lights than a robust texel keeps (12, as photometric-stereo sets
+// have) cannot reject a sample: the command says so and names the flag; --min-inliers lowers
+// the floor, and a floor below the polynomial's 6 terms is refused as a bad command line.
+TEST(CliFit, RobustSolverSaysWhenTooFewLightsLeaveNothingToReject) {
+  test::ScratchDir dir;
+  write_capture(dir.path(), ring_layout(parse_rings("30:6,60:6")), 8, 8);
+  const auto lp = (dir / "lights.lp").string();
+  const auto r = test::run_ptmkit(
+      {"fit", lp, "-o", (dir / "a.ptm").string(), "--solver", "robust", "--threads", "1"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("12 lights and at least 12 inliers"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("--min-inliers"), std::string::npos) << r.out;
+  const auto lowered = test::run_ptmkit({"fit", lp, "-o", (dir / "b.ptm").string(), "--solver",
+                                         "robust", "--min-inliers", "8", "--threads", "1"});
+  ASSERT_EQ(lowered.exit_code, 0) << lowered.err;
+  EXPECT_EQ(lowered.out.find("nothing to reject"), std::string::npos) << lowered.out;
+  const auto plain = test::run_ptmkit({"fit", lp, "-o", (dir / "c.ptm").string()});
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_EQ(plain.out.find("nothing to reject"), std::string::npos) << plain.out;
+  const auto bad = test::run_ptmkit(
+      {"fit", lp, "-o", (dir / "d.ptm").string(), "--solver", "robust", "--min-inliers", "5"});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--min-inliers"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(dir / "d.ptm"));
+}
+
 }  // namespace
 }  // namespace ptmkit

@@ -22,13 +22,14 @@ struct SynthStack {
 // A preset rendered at size x size (the relief scales with the width).
 // A preset rendered at size x size; ks and exponent, when given (> 0), replace its specular
 // lobe (the default preset with ks 0.25, exponent 8 is the broad, unclipped lobe of
-// docs/SOLVERS.md).
+// docs/SOLVERS.md); lights, when given, its light layout (SynthOptions::lights).
 inline SynthStack render_preset(const std::string& preset, int size, double ks = -1.0,
-                                double exponent = -1.0) {
+                                double exponent = -1.0, const std::string& lights = "") {
   synth::SynthOptions o = synth::preset_options(preset);
   o.width = size;
   o.height = size;
   o.write_truth = false;
+  if (!lights.empty()) o.lights = lights;
   if (ks >= 0.0) o.material.ks = ks;
   if (exponent > 0.0) o.material.exponent = exponent;
   SynthStack s;
