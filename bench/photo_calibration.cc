@@ -5,12 +5,15 @@
 // render's truth: each circle's centre and radius, each highlight against the mirror
 // highlight of its light, and each combined light direction.
 //
-//   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [PRESET[:SEED,SEED...] ...]
+//   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
+//                     [PRESET[:SEED,...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
 //       `ptmkit synth --width W --height H` does); default the presets' 640 x 360
 //       --lights: the light layout instead of the preset's, as `ptmkit synth --lights SPEC`
 //       (e.g. rings:15:3,40:3,65:2,80:4)
+//       --no-bases: the spheres lying on the ground, as `ptmkit synth --no-bases`
+//       --spheres-material M: every sphere of M (black-glossy, chrome, glass), as `ptmkit synth`
 //
 // Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
 #include <algorithm>
@@ -37,9 +40,13 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 }
 
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
-         const std::string& light_layout) {
+         const std::string& light_layout, bool bases, const std::string& material) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
+  if (!bases) po.sphere_bases = false;
+  if (!material.empty()) {
+    for (synth::PhotoSphere& s : po.spheres) s.material = synth::parse_sphere_material(material);
+  }
   if (!light_layout.empty()) po.lights = light_layout;
   if (width > 0) synth::resize_photo(width, height, &po);
   const fs::path dir = work / (preset + "-" + std::to_string(seed));
@@ -101,7 +108,7 @@ int main(int argc, char** argv) {
   try {
     if (argc < 2) {
       std::fprintf(stderr,
-                   "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] "
+                   "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M] "
                    "[PRESET[:SEED,...] ...]\n");
       return 2;
     }
@@ -109,13 +116,23 @@ int main(int argc, char** argv) {
     std::vector<std::string> specs(argv + 2, argv + argc);
     int width = 0, height = 0;
     std::string lights;
-    while (!specs.empty() && (specs[0] == "--size" || specs[0] == "--lights")) {
+    bool bases = true;
+    std::string material;
+    while (!specs.empty() && (specs[0] == "--size" || specs[0] == "--lights" ||
+                              specs[0] == "--no-bases" || specs[0] == "--spheres-material")) {
+      if (specs[0] == "--no-bases") {
+        bases = false;
+        specs.erase(specs.begin());
+        continue;
+      }
       if (specs.size() < 2) {
         std::fprintf(stderr, "photo_calibration: %s needs a value\n", specs[0].c_str());
         return 2;
       }
       if (specs[0] == "--lights") {
         lights = specs[1];
+      } else if (specs[0] == "--spheres-material") {
+        material = specs[1];
       } else if (std::sscanf(specs[1].c_str(), "%dx%d", &width, &height) != 2 || width < 32 ||
                  height < 32) {
         std::fprintf(stderr, "photo_calibration: --size needs WxH, e.g. 2560x1440\n");
@@ -145,7 +162,7 @@ int main(int argc, char** argv) {
       }
       for (const unsigned s : seeds) {
         try {
-          run(work, preset, s, width, height, lights);
+          run(work, preset, s, width, height, lights, bases, material);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }
