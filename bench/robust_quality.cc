@@ -141,22 +141,14 @@ void print_ball(int size, double ks, double exponent, double cone_deg, double ex
   std::printf("ball: %d px, ks %.2f, exponent %.1f, 96 lights within %.0f deg, exposure %.2f\n",
               size, ks, exponent, cone_deg, exposure);
   for (const char* name : {"ls", "trim", "lambert", "qtrim", "robust"}) {
-    fit::FitOptions fo;
-    fo.solver = parse_solver(name);
-    fo.robust = robust_from_env();
-    fo.robust.min_scale *= 255.0 / 65535.0;  // 16-bit samples, as a fit from the files takes
-    fo.residual_stats = false;
-    fit::FitOutputs out;
-    out.want_labels = true;
-    out.want_normals = true;
-    CoefficientMap map;
-    CoefficientMapSink sink(&map);
-    (void)fit::fit_images(st.observed, st.dirs, fo, sink, &out);
-    const eval::NormalError e = eval::normal_error(out.normals, st.scene.normals, &mask);
+    fit::RobustOptions ro = robust_from_env();
+    ro.min_scale *= 255.0 / 65535.0;  // 16-bit samples, as a fit from the files takes them
+    const auto r = test::score_solver(st, parse_solver(name), ro, &mask);
+    const eval::NormalError& e = r.normals;
     std::printf("%-10s normals mean %5.2f median %5.2f deg; by tilt", name, e.mean_deg,
                 e.median_deg);
     for (const Ring& ring : rings) {
-      const eval::NormalError er = eval::normal_error(out.normals, st.scene.normals, &ring.mask);
+      const eval::NormalError er = eval::normal_error(r.normal_map, st.scene.normals, &ring.mask);
       std::printf(" %s %5.2f", ring.name, er.mean_deg);
     }
     std::printf("\n");

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ptmkit/eval/truth.h"
@@ -101,12 +102,14 @@ struct SolverScores {
   double psnr_db = 0.0;
   eval::OutlierScores outliers_all;
   eval::OutlierScores outliers_lit;
-  eval::NormalError normals;
+  eval::NormalError normals;  // within `mask` where one is given
+  Image normal_map;           // the fit's normals (FitOutputs::normals)
   fit::FitReport report;
 };
 
 inline SolverScores score_solver(const SynthStack& s, fit::Solver solver,
-                                 const fit::RobustOptions& robust = {}) {
+                                 const fit::RobustOptions& robust = {},
+                                 const Image* mask = nullptr) {
   fit::FitOptions o;
   o.solver = solver;
   o.robust = robust;
@@ -123,7 +126,8 @@ inline SolverScores score_solver(const SynthStack& s, fit::Solver solver,
       eval::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, false);
   r.outliers_lit =
       eval::outlier_scores(out.labels, s.observed, s.diffuse, s.dirs, s.scene.normals, true);
-  r.normals = eval::normal_error(out.normals, s.scene.normals);
+  r.normals = eval::normal_error(out.normals, s.scene.normals, mask);
+  r.normal_map = std::move(out.normals);
   return r;
 }
 
