@@ -174,9 +174,14 @@ TEST(CliFit, RobustSolverSaysWhenTooFewLightsLeaveNothingToReject) {
   EXPECT_NE(r.out.find("12 lights and at least 12 inliers"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("--min-inliers"), std::string::npos) << r.out;
   const auto lowered = test::run_ptmkit({"fit", lp, "-o", (dir / "b.ptm").string(), "--solver",
-                                         "robust", "--min-inliers", "8", "--threads", "1"});
+                                         "robust", "--min-inliers", "8", "--threads", "1",
+                                         "--report", (dir / "b.json").string()});
   ASSERT_EQ(lowered.exit_code, 0) << lowered.err;
   EXPECT_EQ(lowered.out.find("nothing to reject"), std::string::npos) << lowered.out;
+  // The report says which thresholds were in force: 8-bit files keep the floor of 2 grey levels.
+  const auto report = nlohmann::json::parse(slurp(dir / "b.json"));
+  EXPECT_EQ(report["robust_options"]["min_inliers"].get<int>(), 8);
+  EXPECT_DOUBLE_EQ(report["robust_options"]["min_scale_grey"].get<double>(), 2.0);
   const auto plain = test::run_ptmkit({"fit", lp, "-o", (dir / "c.ptm").string()});
   ASSERT_EQ(plain.exit_code, 0) << plain.err;
   EXPECT_EQ(plain.out.find("nothing to reject"), std::string::npos) << plain.out;

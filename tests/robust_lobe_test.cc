@@ -109,7 +109,9 @@ double ball_normals_from_files(const test::BallStack& ball, const std::filesyste
   out.want_normals = true;
   CoefficientMap map;
   CoefficientMapSink sink(&map);
-  (void)fit_capture(read_lp(dir / "lights.lp"), o, sink, &out);
+  const FitReport report = fit_capture(read_lp(dir / "lights.lp"), o, sink, &out);
+  // The robust scale's floor is 2 steps of the 16-bit files (RobustOptions::min_scale).
+  EXPECT_DOUBLE_EQ(report.robust.min_scale, 2.0 / 65535.0);
   return eval::normal_error(out.normals, ball.scene.normals, &ball.mask).mean_deg;
 }
 

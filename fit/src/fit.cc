@@ -69,6 +69,19 @@ nlohmann::json fit_report_json(const FitReport& r) {
                    {"highlight", r.outliers.highlights},
                    {"fallback_texels", r.outliers.fallback_texels},
                    {"ceres_texels", r.outliers.ceres_texels}};
+  if (!is_shared_solver(r.solver)) {
+    // Thresholds in grey levels of 8 bits (1/255 of full scale), as the flags give them.
+    const RobustOptions& o = r.robust;
+    j["robust_options"] = {{"shadow_k", o.shadow_k},
+                           {"highlight_k", o.highlight_k},
+                           {"min_scale_grey", o.min_scale * 255.0},
+                           {"dark_fraction", o.dark_fraction},
+                           {"saturation_level", num(o.saturation_level)},
+                           {"keep_within_grey", o.keep_within * 255.0},
+                           {"keep_within_fraction", o.keep_within_fraction},
+                           {"min_inliers", o.min_inliers},
+                           {"fill_rejected", o.fill_rejected}};
+  }
   {
     nlohmann::json lm = {{"model", std::string(to_string(r.light_model.model))}};
     if (r.light_model.model == LightModel::kNear) {

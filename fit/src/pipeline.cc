@@ -270,6 +270,7 @@ FitReport fit_source(const Designs& designs, const LightModelSetup& light_model,
   report.colour_space = source.colour_space;
   report.design = designs.report;
   report.solver = options.solver;
+  report.robust = run_options.robust;
   report.threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
   const auto fitter = internal::make_row_fitter(setup, designs.ptm ? &*designs.ptm : nullptr,
                                                 designs.basis ? &*designs.basis : nullptr);

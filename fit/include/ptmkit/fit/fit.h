@@ -144,6 +144,10 @@ struct FitReport {
   ResidualStats residuals;
   Solver solver = Solver::kLS;
   OutlierSummary outliers;
+  // The robust solvers' options in force: the ones given, with min_scale in steps of the
+  // input's sample type and saturation_level +inf for float files (written to the JSON for
+  // robust solvers only).
+  RobustOptions robust;
   // The light model used: distant (shared matrix) or near (per-texel), its direction spread
   // and fall-off range over the field.
   NearLightReport light_model;
