@@ -2,7 +2,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <string>
 
 #include "commands.h"
 #include "fit_batch.h"
@@ -225,15 +224,6 @@ void run_fit(const FitArgs& args) {
   if (!lead) return;  // rank 0 reports for the job
   if (!args.report.empty()) write_file_atomic(args.report, run.to_json());
   std::printf("%s", run.brief().c_str());
-  const int keep = plan.options.robust.min_inliers;
-  if (!fit::is_shared_solver(run.fit.solver) && run.fit.lights <= keep) {
-    // Few-light captures (12-light photometric-stereo sets) would otherwise get least squares
-    // with nothing said but the fallback count.
-    std::printf(
-        "note: %d lights and at least %d inliers a texel leave the %s solver nothing to "
-        "reject: every texel kept the least-squares fit (--min-inliers lowers the floor)\n",
-        run.fit.lights, keep, std::string(fit::to_string(run.fit.solver)).c_str());
-  }
 }
 
 }  // namespace

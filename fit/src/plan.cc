@@ -142,6 +142,16 @@ std::string FitRunReport::brief() const {
                   100.0 * static_cast<double>(fit.outliers.highlights) / total,
                   static_cast<unsigned long long>(fit.outliers.fallback_texels));
     out += line;
+    if (fit.lights <= fit.robust.min_inliers) {
+      // Few-light captures (12-light photometric-stereo sets) would otherwise get least
+      // squares with nothing said but the fallback count.
+      std::snprintf(line, sizeof line,
+                    "note: %d lights and at least %d inliers a texel leave the %s solver nothing "
+                    "to reject: every texel kept the least-squares fit (--min-inliers lowers "
+                    "the floor)\n",
+                    fit.lights, fit.robust.min_inliers, std::string(to_string(fit.solver)).c_str());
+      out += line;
+    }
   }
   if (written.relit_mean_abs_grey) {
     std::snprintf(line, sizeof line,

@@ -93,7 +93,8 @@ struct FitRunReport {
   WriteSummary written;
   // The fit report's JSON with input, output, quantisation and model_selection added.
   [[nodiscard]] std::string to_json() const;
-  // The lines `ptmkit fit` prints: the fit, the light model, the solver's outliers, the file.
+  // The lines `ptmkit fit` prints: the fit, the light model, the solver's outliers (and a note
+  // where the lights are too few for it to reject any), the file.
   [[nodiscard]] std::string brief() const;
 };
 
