@@ -399,6 +399,20 @@ TEST(ImageDecode, JpegOfSeveralScansIsBoundedBeforeDecoding) {
   }
   set_memory_budget_bytes(0);
 
+  // The same huge file with a stray byte after its start-of-image marker: libjpeg skips it
+  // (OpenImageIO's reader would then allocate the whole coefficient buffer, 2.7 GB), so a file
+  // that starts FF D8 is the bounded JPEG decoder's whatever byte follows.
+  std::string stray = huge;
+  stray.insert(2, 1, static_cast<char>(0xFD));
+  spit(dir / "stray.jpg", stray);
+  try {
+    (void)read_image(dir / "stray.jpg");
+    FAIL() << "a 30000 x 30000 progressive JPEG after a stray byte was accepted";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("stray.jpg"));
+    EXPECT_THAT(e.what(), HasSubstr("cannot hold"));
+  }
+
   // Cut short: an error at the damage unless damage is allowed.
   spit(dir / "cut.jpg", bytes.substr(0, bytes.size() / 2));
   try {

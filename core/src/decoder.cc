@@ -241,7 +241,10 @@ std::unique_ptr<Decoder> open_decoder(const fs::path& path, const DecodeSettings
   if (bytes < 8) {
     throw Error(where(path) + ": not an image (" + std::to_string(bytes) + " bytes)");
   }
-  if (magic[0] == 0xFF && magic[1] == 0xD8 && magic[2] == 0xFF) {
+  // A start-of-image marker is a JPEG to libjpeg, whatever follows (it skips stray bytes
+  // before the next marker with a warning), so such a file gets the bounded decoder: handed to
+  // OpenImageIO, its header alone could make libjpeg allocate gigabytes.
+  if (magic[0] == 0xFF && magic[1] == 0xD8) {
     if (auto d = open_jpeg(path, bytes, settings)) return d;
     return open_oiio(path, settings);  // CMYK and YCCK
   }
