@@ -6,7 +6,7 @@
 // highlight of its light, and each combined light direction.
 //
 //   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
-//                     [PRESET[:SEED,...] ...]
+//                     [--environment dark|lit] [PRESET[:SEED,...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
 //       `ptmkit synth --width W --height H` does); default the presets' 640 x 360
@@ -14,6 +14,8 @@
 //       (e.g. rings:15:3,40:3,65:2,80:4)
 //       --no-bases: the spheres lying on the ground, as `ptmkit synth --no-bases`
 //       --spheres-material M: every sphere of M (black-glossy, chrome, glass), as `ptmkit synth`
+//       --environment E: the room the spheres mirror, dark (the presets') or lit, as `ptmkit
+//       synth --environment E`
 //
 // Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
 #include <algorithm>
@@ -40,7 +42,8 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 }
 
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
-         const std::string& light_layout, bool bases, const std::string& material) {
+         const std::string& light_layout, bool bases, const std::string& material,
+         const std::string& environment) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
   if (!bases) po.sphere_bases = false;
@@ -48,6 +51,7 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
     for (synth::PhotoSphere& s : po.spheres) s.material = synth::parse_sphere_material(material);
   }
   if (!light_layout.empty()) po.lights = light_layout;
+  if (!environment.empty()) po.environment = synth::parse_environment(environment);
   if (width > 0) synth::resize_photo(width, height, &po);
   const fs::path dir = work / (preset + "-" + std::to_string(seed));
   fs::remove_all(dir);
@@ -108,8 +112,8 @@ int main(int argc, char** argv) {
   try {
     if (argc < 2) {
       std::fprintf(stderr,
-                   "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M] "
-                   "[PRESET[:SEED,...] ...]\n");
+                   "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
+                   "[--spheres-material M] [--environment dark|lit] [PRESET[:SEED,...] ...]\n");
       return 2;
     }
     const fs::path work = argv[1];
@@ -117,9 +121,10 @@ int main(int argc, char** argv) {
     int width = 0, height = 0;
     std::string lights;
     bool bases = true;
-    std::string material;
-    while (!specs.empty() && (specs[0] == "--size" || specs[0] == "--lights" ||
-                              specs[0] == "--no-bases" || specs[0] == "--spheres-material")) {
+    std::string material, environment;
+    while (!specs.empty() &&
+           (specs[0] == "--size" || specs[0] == "--lights" || specs[0] == "--no-bases" ||
+            specs[0] == "--spheres-material" || specs[0] == "--environment")) {
       if (specs[0] == "--no-bases") {
         bases = false;
         specs.erase(specs.begin());
@@ -133,6 +138,8 @@ int main(int argc, char** argv) {
         lights = specs[1];
       } else if (specs[0] == "--spheres-material") {
         material = specs[1];
+      } else if (specs[0] == "--environment") {
+        environment = specs[1];
       } else if (std::sscanf(specs[1].c_str(), "%dx%d", &width, &height) != 2 || width < 32 ||
                  height < 32) {
         std::fprintf(stderr, "photo_calibration: --size needs WxH, e.g. 2560x1440\n");
@@ -162,7 +169,7 @@ int main(int argc, char** argv) {
       }
       for (const unsigned s : seeds) {
         try {
-          run(work, preset, s, width, height, lights, bases, material);
+          run(work, preset, s, width, height, lights, bases, material, environment);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }

@@ -559,6 +559,67 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
   EXPECT_LE(worst, kPhotoChromeWorstHighlightPx);
 }
 
+// In a lit room a mirror sphere shows the room's horizon as a sharp circle at about 0.7 of its
+// radius, concentric with an outline that mirrors the dark cup or cloth beside it and is
+// faint: the circle Hough proposes and the rim refinement used to settle on (chrome 28%, black
+// glossy 30% too small). That circle reflects the low lights to below the sample plane; the
+// outline keeps them all above. Chrome spheres on cups, and black glossy balls lying on the
+// cloth, each in a lit room under 8 lights (3 of them 15 degrees up). Balls lying on the
+// cloth come out 0.7-0.9% too large in a dark room and a lit one alike (docs/CALIBRATION.md),
+// so there the radius is held to what tells the outline from the horizon (2%), the chrome
+// spheres to the targets.
+TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
+  struct Case {
+    const char* preset;
+    const char* material;  // nullptr: the preset's
+    bool bases;
+    double radius_rel;  // the radius error allowed
+  };
+  for (const Case& k : {Case{"photo-chrome", nullptr, true, kRadiusTargetRel},
+                        Case{"photo-glass", "black-glossy", false, 0.02}}) {
+    PhotoImages p;
+    p.options = synth::photo_preset_options(k.preset);
+    p.options.lights = kEightLights;
+    p.options.environment = synth::PhotoEnvironment::kLit;
+    p.options.sphere_bases = k.bases;
+    if (k.material != nullptr) {
+      for (synth::PhotoSphere& s : p.options.spheres) {
+        s.material = synth::parse_sphere_material(k.material);
+      }
+    }
+    const synth::PhotoRenderer renderer(p.options);
+    p.truth = renderer.truth();
+    for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+      p.images.push_back(renderer.render(static_cast<int>(i)));
+      p.names.emplace_back("lit" + std::to_string(i) + ".jpg");
+    }
+    const StackCalibration r = calibrate_photo(p, 2);
+    ASSERT_EQ(r.rig.spheres.size(), 2u) << k.preset;
+    bool horizon_seen = false;
+    for (std::size_t s = 0; s < 2; ++s) {
+      const Circle& c = r.rig.spheres[s].sphere;
+      const synth::SphereOutline& t = p.truth.spheres[s].outline;
+      const double off = (c.centre_px - t.centre_px).norm();
+      const double rel = std::abs(c.radius_px - t.radius_px) / t.radius_px;
+      std::printf("%s lit, sphere %zu: centre off %.3f px, radius off %.3f%%\n", k.preset, s, off,
+                  100.0 * rel);
+      EXPECT_LE(off, kCentreTargetPx) << k.preset;
+      EXPECT_LE(rel, k.radius_rel) << k.preset;
+      EXPECT_EQ(r.rig.spheres[s].usable(), 8) << k.preset;
+      // The horizon's circle is among the candidates, refused, with lights below the plane.
+      for (const SphereCandidate& cand : r.candidates) {
+        if ((cand.circle.centre_px - t.centre_px).norm() > 0.15 * t.radius_px) continue;
+        if (std::abs(cand.circle.radius_px / t.radius_px - 0.71) > 0.06) continue;
+        horizon_seen = true;
+        EXPECT_FALSE(cand.chosen) << k.preset;
+        EXPECT_GT(cand.below_plane_spots, 0) << k.preset;
+        EXPECT_LE(cand.geometry, 0.5) << k.preset;
+      }
+    }
+    EXPECT_TRUE(horizon_seen) << k.preset << ": the mirrored horizon was not proposed";
+  }
+}
+
 // One black glossy sphere filling most of the frame, its top cut by the frame and its bottom
 // hidden by the pedestal, in a dark room: the first circles proposed are well off, and rays
 // cast from a centre that far off cross the rim obliquely; the refinement is repeated from

@@ -205,17 +205,16 @@ constexpr double kEdgeVsHaloPx = 0.3;
 // this much (sum of pairwise angles, degrees).
 constexpr double kSpotAgreementMarginDeg = 3.0;
 
-// A light is far brighter than anything it lights: its reflection lifts the sphere, in linear
-// light, by at least this share of what the sphere's highlights lift it by (their upper
-// quartile over the stack). A fainter spot is the lit scene mirrored in the sphere or noise on a
-// bright static reflection, seen where the light's own reflection is hidden (behind the
-// sphere, or under its base). On the photographic renders every highlight lifts by 0.92-1.0
-// and the brightest such spot by at most 0.11.
-constexpr double kLightLiftShare = 0.25;
-
 // The full-resolution circle is chosen by the rim points within this distance (see
 // consensus_circle).
 constexpr double kRimChoiceTolPx = 1.0;
+
+// The full-resolution rim is looked for within this share of the candidate's radius (the
+// candidate is already within a few percent of the outline). Further in, other circles
+// concentric with the outline can be sharper: the horizon mirrored in a chrome ball in a lit
+// room lies at 0.7 of its radius, and a refinement reaching it took it (28% too small).
+constexpr double kRimRefineBand = 0.12;
+
 // How sharp a composite shows a rim: the share of rays whose edge lies within this many of its
 // pixels of the circle fitted (rim_circle's `tight`).
 constexpr double kTightRimPx = 0.5;
@@ -687,7 +686,7 @@ Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
   cv::Mat f = stretch(plane, CV_32F, logarithm);
   cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
   int inside = 0;
-  auto e = ray_edges(f, around.centre_px, around.radius_px, &inside);
+  auto e = ray_edges(f, around.centre_px, around.radius_px, &inside, kRimRefineBand);
   for (Eigen::Vector2d& p : e) p = op.to(p);
   Circle r = op.from(consensus_circle(e, op.to(around), rim, kRimChoiceTolPx));
   rim_against_brighter(f, op, &r);
@@ -755,13 +754,24 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     planes.emplace_back("stack's maximum", &ev.full_max);
     const OutlinePlane photo_plane(det.camera, ev.w, ev.h, 1);
     const OutlinePlane small_plane(det.camera, ev.w, ev.h, ev.scale);
-    for (const Circle& c : small) {
+    std::vector<const SphereCandidate*> chosen;
+    for (const SphereCandidate& cand : out.candidates) {
+      if (cand.chosen) chosen.push_back(&cand);
+    }
+    for (std::size_t ci = 0; ci < small.size(); ++ci) {
+      const Circle& c = small[ci];
+      const SphereCandidate& cand = *chosen.at(ci);
       // A rim circle stands for the candidate when its centre and radius each lie within 5% of
-      // the radius (plus an analysis pixel) of the candidate's.
+      // the radius (plus an analysis pixel) of the candidate's, and it reflects no more of the
+      // candidate's light spots to below the sample plane (an edge inside the outline, such as
+      // the horizon mirrored in a chrome ball, lies within 5% on a large sphere's lit rim).
+      const auto keeps_lights_above = [&](const Circle& r) {
+        return below_plane_spots(cand, r, det.camera, ev, 1) <= cand.below_plane_spots;
+      };
       const auto near_candidate = [&](const Circle& r) {
         const double tol = 0.05 * c.radius_px + ev.scale;
         return (r.centre_px - c.centre_px).norm() < tol &&
-               std::abs(r.radius_px - c.radius_px) < tol;
+               std::abs(r.radius_px - c.radius_px) < tol && keeps_lights_above(r);
       };
       Circle best = c;
       double best_rim = 0.0, best_tight = 0.0;
@@ -804,7 +814,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
           const Circle r = rim_circle(plane, logarithm, cs, op, &sr.rim, &sr.tight);
           if (sr.rim < 0.3) continue;
           sr.circle = to_photo(r, ev.scale);
-          sr.found = !must_be_near || near_candidate(sr.circle);
+          sr.found = must_be_near ? near_candidate(sr.circle) : keeps_lights_above(sr.circle);
           break;
         }
         return sr;
@@ -1341,6 +1351,9 @@ std::string StackCalibration::to_json() const {
                                {"track", c.track},
                                {"moving_spots", c.moving_spots},
                                {"distinct_spots", c.distinct_spots},
+                               {"light_spots", c.light_spots},
+                               {"below_plane_spots", c.below_plane_spots},
+                               {"geometry", c.geometry},
                                {"chosen", c.chosen},
                                {"note", c.note}});
   }

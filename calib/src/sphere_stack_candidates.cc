@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -68,14 +69,14 @@ Circle OutlinePlane::from(const Circle& q) const {
   return c;
 }
 
-// Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r: the
+// Per ray from the centre (360 rays), the strongest edge between (1 - band) r and (1 + band) r: the
 // largest radial derivative of the smoothed composite, at least 2 grey levels a pixel, to a
 // sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the others.
 // Profiles are sampled at r / 200, between 0.35 and 1 px: a parabola through samples further
 // apart than the blurred edge is wide misplaces it (a sphere of radius 720 px sampled every
 // 3.6 px: 0.5-1.0 px off, every pixel: 0.13-0.24).
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
-                                       int* inside) {
+                                       int* inside, double band) {
   constexpr int kRays = 360;
   std::vector<Eigen::Vector2d> out;
   *inside = 0;
@@ -88,8 +89,8 @@ std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& 
     if (near.x() < 1 || near.y() < 1 || near.x() > f.cols - 2 || near.y() > f.rows - 2) continue;
     ++*inside;
     prof.clear();
-    const double t0 = 0.7 * r;
-    for (double t = t0; t <= 1.3 * r; t += step) {
+    const double t0 = (1.0 - band) * r;
+    for (double t = t0; t <= (1.0 + band) * r; t += step) {
       const Eigen::Vector2d p = c + t * dir;
       if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
       const int x0 = static_cast<int>(p.x()), y0 = static_cast<int>(p.y());
@@ -227,14 +228,49 @@ struct Scored {
   std::vector<Spot> first;  // per image: the brightest moving spot inside (area 0: none)
 };
 
+int below_plane_spots(const SphereCandidate& cand, const Circle& circle_photo,
+                      const SphereCamera& camera, const Evidence& ev, int spots_scale) {
+  const double min_z = -std::sin(kBelowPlaneSlackDeg * std::numbers::pi / 180.0);
+  int n = 0;
+  for (const std::vector<Eigen::Vector2d>& spots : cand.light_spots_px) {
+    if (spots.empty()) continue;
+    const bool all_below = std::all_of(spots.begin(), spots.end(), [&](const Eigen::Vector2d& p) {
+      return reflect_highlight(circle_photo, camera, photo_px(p, spots_scale), ev.w, ev.h).z() <
+             min_z;
+    });
+    if (all_below) ++n;
+  }
+  return n;
+}
+
+// Proposals grown outward from a circle that puts lights below the sample plane (see
+// find_candidates): steps of kGrowStep, each refined within a band that reaches just short of
+// the circle it grew from, at most kMaxGrowSteps of them (1.08^8 = 1.85); and one jump to the
+// outline a mirrored horizon implies (1 / sin 45 degrees), refined within kHorizonBand.
+constexpr double kGrowStep = 1.08;
+// What an image whose light the circle reflects to below the plane costs the score, in
+// multiples of its share of the images. The spheres' own outlines on the photographic renders
+// (dark and lit rooms) reflect none below, but a glass ball under lights near the camera's
+// axis can show only its refracted hot spot's glow in an image (1 of 10 reflected below);
+// the horizon mirrored in a chrome ball reflects 3 of 8 below, 8 of 22.
+constexpr double kBelowPlaneCost = 2.0;
+constexpr int kMaxGrowSteps = 8;
+constexpr double kHorizonGrow = 1.41;
+constexpr double kHorizonBand = 0.12;
+constexpr double kGrownMaxShift = 0.1;
+
+// `rim_band`: the rim is the share of rays whose strongest edge within this share of the
+// radius lies on the circle (the band the circle was refined in: a grown outline keeps its
+// own support beside the sharper circle inside it that it grew from).
 SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>& comps,
-                                const Circle& c, double min_peak) {
+                                const Circle& c, double min_peak, const SphereCamera& camera,
+                                double rim_band) {
   SphereCandidate out;
   out.circle = c;
   for (const Composite& comp : comps) {
     int inside = 0;
     const std::vector<Eigen::Vector2d> e =
-        ray_edges(comp.smooth, c.centre_px, c.radius_px, &inside);
+        ray_edges(comp.smooth, c.centre_px, c.radius_px, &inside, rim_band);
     double rim = 0.0;
     if (inside >= 90) {
       const double tol = std::max(1.0, 0.01 * c.radius_px);
@@ -250,16 +286,41 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   // The track: per image the brightest moving spot inside, compact; distinct places.
   const double disc = std::numbers::pi * c.radius_px * c.radius_px;
   std::vector<Eigen::Vector2d> places;
+  std::vector<double> lifts;  // per place: its spot's lift in linear light
+  std::vector<std::vector<Spot>> spots_of(static_cast<std::size_t>(ev.n));
   out.spots_px.assign(static_cast<std::size_t>(ev.n), std::nullopt);
   for (int i = 0; i < ev.n; ++i) {
-    const std::vector<Spot> spots = moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
+    std::vector<Spot>& spots = spots_of[static_cast<std::size_t>(i)];
+    spots = moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
     if (spots.empty()) continue;
     const Spot& s = spots.front();
     if (s.area > std::max(0.1 * disc, 4.0)) continue;
     places.push_back(s.centre_small);
+    lifts.push_back(s.lift_linear);
     out.spots_px[static_cast<std::size_t>(i)] = s.centre_small;
   }
   out.moving_spots = static_cast<int>(places.size());
+  // The spots bright enough to be a light's reflection (kLightLiftShare of the upper quartile
+  // of the track's lifts), and the images whose every such spot the circle reflects to below
+  // the sample plane (on glass the brightest can be the refracted hot spot, across the
+  // centre from the reflection).
+  out.light_spots_px.assign(static_cast<std::size_t>(ev.n), {});
+  if (!lifts.empty()) {
+    std::vector<double> sorted = lifts;
+    const auto q = static_cast<std::ptrdiff_t>(3 * (sorted.size() - 1) / 4);
+    std::nth_element(sorted.begin(), sorted.begin() + q, sorted.end());
+    const double light_lift = sorted[static_cast<std::size_t>(q)];
+    for (std::size_t i = 0; i < spots_of.size(); ++i) {
+      for (const Spot& sp : spots_of[i]) {
+        if (sp.lift_linear >= kLightLiftShare * light_lift &&
+            sp.area <= std::max(0.1 * disc, 4.0)) {
+          out.light_spots_px[i].push_back(sp.centre_small);
+        }
+      }
+      if (!out.light_spots_px[i].empty()) ++out.light_spots;
+    }
+    out.below_plane_spots = below_plane_spots(out, to_photo(c, ev.scale), camera, ev, ev.scale);
+  }
   // A place is distinct when no other image's spot is within 1.5 analysis pixels (or 2% of
   // the radius) of it.
   const double near = std::max(1.5, 0.02 * c.radius_px);
@@ -273,22 +334,37 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   out.track = static_cast<double>(out.distinct_spots) / ev.n;
   // A circle needs a rim (a third of the rays make it a full one) and a track: either alone
   // is no sphere (a coin has a rim, any circle around the highlights has their track).
-  out.score = std::min(1.0, out.rim / 0.3) * out.track;
+  // A light's reflection put below the sample plane says the circle is too small: on a
+  // mirror sphere in a lit room the reflected horizon is a sharper circle than the outline,
+  // at 0.7 of its radius, and the low lights' highlights lie between the two (chrome
+  // spheres in a lit room: 8 of 22 lights below the plane of that circle, none of the
+  // outline's). Each such image costs kBelowPlaneCost times its share.
+  out.geometry = out.light_spots > 0
+                     ? std::max(0.0, 1.0 - kBelowPlaneCost * out.below_plane_spots / out.light_spots)
+                     : 1.0;
+  out.score = std::min(1.0, out.rim / 0.3) * out.track * out.geometry;
   return out;
 }
 
-bool same_circle(const Circle& a, const Circle& b) {
-  return (a.centre_px - b.centre_px).norm() < 0.15 * std::max(a.radius_px, b.radius_px) &&
-         std::abs(a.radius_px - b.radius_px) < 0.15 * std::max(a.radius_px, b.radius_px);
+// Two circles whose centres and radii each differ by less than `tol` of the larger radius.
+bool same_circle(const Circle& a, const Circle& b, double tol) {
+  return (a.centre_px - b.centre_px).norm() < tol * std::max(a.radius_px, b.radius_px) &&
+         std::abs(a.radius_px - b.radius_px) < tol * std::max(a.radius_px, b.radius_px);
 }
 
 std::string describe(const SphereCandidate& c) {
-  char buf[256];
+  char geometry[128] = "";
+  if (c.below_plane_spots > 0) {
+    std::snprintf(geometry, sizeof(geometry),
+                  "; geometry %.2f: %d of %d lights reflected to below the sample plane",
+                  c.geometry, c.below_plane_spots, c.light_spots);
+  }
+  char buf[384];
   std::snprintf(buf, sizeof(buf),
                 "(%.1f, %.1f) r %.1f px: score %.2f (rim %.2f, track %.2f: %d images with a "
-                "moving spot inside, %d at their own place)%s%s",
+                "moving spot inside, %d at their own place%s)%s%s",
                 c.circle.centre_px.x(), c.circle.centre_px.y(), c.circle.radius_px, c.score, c.rim,
-                c.track, c.moving_spots, c.distinct_spots, c.note.empty() ? "" : "; ",
+                c.track, c.moving_spots, c.distinct_spots, geometry, c.note.empty() ? "" : "; ",
                 c.note.c_str());
   return buf;
 }
@@ -342,7 +418,14 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
         add_hough(comp.small8(reg), lo, std::min(hi, lo * 2.5), reg.tl(), &raw);
       }
     }
-    for (const Circle& rough : raw) {
+    // Per proposal: how many steps outward it was grown (0: Hough's) and the share of its
+    // radius its refinement looks within.
+    std::vector<int> generation(raw.size(), 0);
+    std::vector<double> bands(raw.size(), 0.3);
+    std::vector<double> parent_radius(raw.size(), 0.0);  // grown: the radius it grew from
+    for (std::size_t pi = 0; pi < raw.size(); ++pi) {
+      const Circle rough = raw[pi];
+      const double band = bands[pi];
       // Refined on the stretched composites' edge. What stays still (the median, the
       // reference photo) comes first: the maximum and mean also hold the moving highlights'
       // flares. The first with a rim on 30% of the rays is kept, else the best. Rays cast
@@ -359,7 +442,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
           if (k >= comps.size()) continue;
           int inside = 0;
           const std::vector<Eigen::Vector2d> e =
-              ray_edges(comps[k].smooth, from.centre_px, from.radius_px, &inside);
+              ray_edges(comps[k].smooth, from.centre_px, from.radius_px, &inside, band);
           if (inside < 90) continue;
           double rim = 0.0;
           const Circle c = consensus_circle(e, from, &rim);
@@ -378,19 +461,61 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
         from = round_best;
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
-      // Of two proposals that refine to about the same circle, the better supported stays.
+      // A grown proposal stands for an outline concentric with the circle it grew from (up to
+      // the pinhole's shift of the mirrored horizon: 0.08 of the radius); one that wandered
+      // off has found another object's edge.
+      if (generation[pi] > 0 &&
+          (best.centre_px - rough.centre_px).norm() > kGrownMaxShift * rough.radius_px) {
+        continue;
+      }
+      SphereCandidate scored = score_candidate(ev, comps, best, min_peak, camera, band);
+      // A circle that reflects a light to below the plane is too small for the sphere: the
+      // outline is looked for further out. A sphere shows circles concentric with its outline
+      // inside it (the horizon mirrored at 0.7 of the radius, the base or cup mirrored near
+      // the limb), which in a lit room can be sharper than the outline and are all Hough
+      // proposes, so the search walks outward from edge to edge (kGrowStep) and stops at the
+      // first circle that keeps every light above the plane; a base or cup around the sphere
+      // lies beyond it. The horizon's own ratio (kHorizonGrow) is tried as one jump. Only
+      // circles whose rim and track would make them a sphere are grown.
+      const bool would_count = std::min(1.0, scored.rim / 0.3) * scored.track >= opt.min_score;
+      // A step that found no edge beyond the circle it grew from ends its walk.
+      const bool moved_out = generation[pi] == 0 || best.radius_px > 1.02 * parent_radius[pi];
+      if (scored.below_plane_spots > 0 && would_count && moved_out &&
+          generation[pi] < kMaxGrowSteps) {
+        const auto grow = [&](double factor, double grown_band) {
+          Circle q;
+          q.centre_px = best.centre_px;
+          q.radius_px = best.radius_px * factor;
+          // Proposals refined to the same circle grow the same way: once is enough.
+          for (std::size_t k = 0; k < raw.size(); ++k) {
+            if (generation[k] > 0 && (raw[k].centre_px - q.centre_px).norm() < 0.5 &&
+                std::abs(raw[k].radius_px - q.radius_px) < 0.5) {
+              return;
+            }
+          }
+          raw.push_back(q);
+          generation.push_back(generation[pi] + 1);
+          bands.push_back(grown_band);
+          parent_radius.push_back(best.radius_px);
+        };
+        grow(kGrowStep, kGrowStep - 1.0 - 0.02);
+        if (generation[pi] == 0) grow(kHorizonGrow, kHorizonBand);
+      }
+      // Of two proposals that refine to about the same circle, the one that keeps more lights
+      // above the sample plane stays, else the better supported.
       const auto dup = std::find_if(all.begin(), all.end(), [&](const SphereCandidate& o) {
-        return same_circle(o.circle, best);
+        return same_circle(o.circle, best, 0.15);
       });
       if (dup != all.end()) {
         const auto j = static_cast<std::size_t>(dup - all.begin());
-        if (best_rim > refined_rim[j]) {
-          *dup = score_candidate(ev, comps, best, min_peak);
+        if (scored.geometry > dup->geometry ||
+            (scored.geometry == dup->geometry && best_rim > refined_rim[j])) {
+          *dup = std::move(scored);
           refined_rim[j] = best_rim;
         }
         continue;
       }
-      all.push_back(score_candidate(ev, comps, best, min_peak));
+      all.push_back(std::move(scored));
       refined_rim.push_back(best_rim);
       region_of.push_back(static_cast<int>(g));
     }
@@ -413,6 +538,9 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
     c.circle = to_photo(c.circle, ev.scale);
     for (auto& p : c.spots_px) {
       if (p) *p = photo_px(*p, ev.scale);
+    }
+    for (auto& spots : c.light_spots_px) {
+      for (Eigen::Vector2d& p : spots) p = photo_px(p, ev.scale);
     }
   }
   auto overlap = [](const SphereCandidate& a, const SphereCandidate& b) {

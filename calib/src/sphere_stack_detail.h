@@ -155,6 +155,19 @@ inline double to_linear(double v, bool srgb) {
 
 // ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
 
+// A light is far brighter than anything it lights: its reflection lifts the sphere, in linear
+// light, by at least this share of what the sphere's highlights lift it by (their upper
+// quartile over the stack). A fainter spot is the lit scene mirrored in the sphere or noise on a
+// bright static reflection, seen where the light's own reflection is hidden (behind the
+// sphere, or under its base). On the photographic renders every highlight lifts by 0.92-1.0
+// and the brightest such spot by at most 0.11.
+inline constexpr double kLightLiftShare = 0.25;
+
+// A light reflects off a sphere lying on the sample plane only from above the plane, so a
+// circle that puts a light's reflection below it (by more than this elevation, degrees:
+// noise on a light at the horizon) is not the sphere's outline.
+inline constexpr double kBelowPlaneSlackDeg = 2.0;
+
 // Where circles are fitted to a sphere's outline. A pinhole camera sees the outline as the cone
 // of rays tangent to the sphere: an ellipse, stretched away from the principal point by about
 // 1 / cos of the centre's angle off the axis (2% at 12 degrees: 3.4 px on a sphere of radius
@@ -191,10 +204,10 @@ inline Eigen::Vector2d small_px(const Eigen::Vector2d& photo, double scale) {
 // An analysis-size circle (and its outline points) in photo pixels.
 Circle to_photo(const Circle& small, int scale);
 
-// Per ray from the centre (360 rays), the strongest edge between 0.7 r and 1.3 r of the
-// smoothed composite `f`; `inside` counts the rays that stay in the frame.
+// Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
+// (1 + band) r of the smoothed composite `f`; `inside` counts the rays that stay in the frame.
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
-                                       int* inside);
+                                       int* inside, double band = 0.3);
 // The circle the rim points agree on, near `rough`; `rim` gets the share of rays that agree
 // (within max(1 px, 1% r)). With `choose_tol_px` > 0 the circle is chosen by the points within
 // that distance instead.
@@ -205,6 +218,12 @@ Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& r
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
                                              double min_peak, int count, const SphereCamera& camera,
                                              std::vector<Circle>* chosen_photo);
+// How many of the candidate's images with light spots (SphereCandidate::light_spots_px)
+// `circle_photo` (photo pixels) reflects to below the sample plane, every spot of the image;
+// the spots are in pixels of `spots_scale` (the analysis scale while candidates are scored, 1
+// once find_candidates has returned them).
+int below_plane_spots(const SphereCandidate& cand, const Circle& circle_photo,
+                      const SphereCamera& camera, const Evidence& ev, int spots_scale);
 // One line on a candidate: circle, score and its parts, why chosen or refused.
 std::string describe(const SphereCandidate& c);
 

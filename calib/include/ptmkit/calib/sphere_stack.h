@@ -22,9 +22,14 @@
 //           and lies at its own place: a mirror sphere shows each light at a different point
 //           of one circle; a coin, dish or lens glints at the same few places or lights up
 //           as a whole, so its track is short
-//   score   min(1, rim / 0.3) x track: a rim on a third of the rays counts as a full rim;
-//           neither a rim alone (a coin) nor a track alone (any circle drawn around the
-//           highlights) makes a sphere
+//   geometry  1 - 2 x the share of those spots (the ones bright enough to be a light's
+//           reflection) that the circle reflects to below the sample plane, at least 0: a
+//           sphere on the plane reflects every light from above it, and a circle inside the
+//           outline (the horizon mirrored in a chrome ball in a lit room, at 0.7 of its
+//           radius) puts the low lights below it
+//   score   min(1, rim / 0.3) x track x geometry: a rim on a third of the rays counts as a
+//           full rim; neither a rim alone (a coin) nor a track alone (any circle drawn around
+//           the highlights) makes a sphere
 // The `sphere_count` best non-overlapping candidates with score >= min_score are taken; for
 // two or three spheres, of the ten best the set with the highest sum of scores times
 // (1 + agreement) / 2, agreement = its worst pair's share of common images whose spots reflect
@@ -126,10 +131,20 @@ struct SphereCandidate {
   double score = 0.0;      // 0..1
   int moving_spots = 0;    // images with a compact moving spot inside
   int distinct_spots = 0;  // of those, at their own place
+  // Images with a spot bright enough to be a light's reflection, those the circle reflects
+  // to below the sample plane (light_spots_px), and the share of score they leave (geometry
+  // above).
+  int light_spots = 0;
+  int below_plane_spots = 0;
+  double geometry = 1.0;  // 0..1
   bool chosen = false;
   std::string note;  // why refused, or where it came from
   // Per image, the brightest moving spot inside (photo pixels), if compact.
   std::vector<std::optional<Eigen::Vector2d>> spots_px;
+  // Per image, the moving spots inside bright enough to be a light's reflection (photo
+  // pixels): light_spots counts the images with one, below_plane_spots those whose every
+  // such spot the circle reflects to below the sample plane.
+  std::vector<std::vector<Eigen::Vector2d>> light_spots_px;
 };
 
 struct StackCalibration {
