@@ -339,9 +339,10 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   // at 0.7 of its radius, and the low lights' highlights lie between the two (chrome
   // spheres in a lit room: 8 of 22 lights below the plane of that circle, none of the
   // outline's). Each such image costs kBelowPlaneCost times its share.
-  out.geometry = out.light_spots > 0
-                     ? std::max(0.0, 1.0 - kBelowPlaneCost * out.below_plane_spots / out.light_spots)
-                     : 1.0;
+  out.geometry =
+      out.light_spots > 0
+          ? std::max(0.0, 1.0 - kBelowPlaneCost * out.below_plane_spots / out.light_spots)
+          : 1.0;
   out.score = std::min(1.0, out.rim / 0.3) * out.track * out.geometry;
   return out;
 }
