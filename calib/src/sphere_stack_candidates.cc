@@ -69,11 +69,11 @@ Circle OutlinePlane::from(const Circle& q) const {
   return c;
 }
 
-// Per ray from the centre (360 rays), the strongest edge between (1 - band) r and (1 + band) r: the
-// largest radial derivative of the smoothed composite, at least 2 grey levels a pixel, to a
-// sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the others.
-// Profiles are sampled at r / 200, between 0.35 and 1 px: a parabola through samples further
-// apart than the blurred edge is wide misplaces it (a sphere of radius 720 px sampled every
+// Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
+// (1 + band) r: the largest radial derivative of the smoothed composite, at least 2 grey levels a
+// pixel, to a sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the
+// others. Profiles are sampled at r / 200, between 0.35 and 1 px: a parabola through samples
+// further apart than the blurred edge is wide misplaces it (a sphere of radius 720 px sampled every
 // 3.6 px: 0.5-1.0 px off, every pixel: 0.13-0.24).
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
                                        int* inside, double band) {
@@ -246,18 +246,22 @@ int below_plane_spots(const SphereCandidate& cand, const Circle& circle_photo,
 // Proposals grown outward from a circle that puts lights below the sample plane (see
 // find_candidates): steps of kGrowStep, each refined within a band that reaches just short of
 // the circle it grew from, at most kMaxGrowSteps of them (1.08^8 = 1.85); and one jump to the
-// outline a mirrored horizon implies (1 / sin 45 degrees), refined within kHorizonBand.
+// outline a mirrored horizon implies (1 / sin 45 degrees), refined within kHorizonBand. A
+// grown proposal whose refinement moves its centre by more than kGrownMaxShift of its radius
+// has left the sphere (the mirrored horizon's circle lies up to 0.08 r off the outline's
+// centre under the pinhole).
 constexpr double kGrowStep = 1.08;
+constexpr int kMaxGrowSteps = 8;
+constexpr double kHorizonGrow = 1.41;
+constexpr double kHorizonBand = 0.12;
+constexpr double kGrownMaxShift = 0.1;
+
 // What an image whose light the circle reflects to below the plane costs the score, in
 // multiples of its share of the images. The spheres' own outlines on the photographic renders
 // (dark and lit rooms) reflect none below, but a glass ball under lights near the camera's
 // axis can show only its refracted hot spot's glow in an image (1 of 10 reflected below);
 // the horizon mirrored in a chrome ball reflects 3 of 8 below, 8 of 22.
 constexpr double kBelowPlaneCost = 2.0;
-constexpr int kMaxGrowSteps = 8;
-constexpr double kHorizonGrow = 1.41;
-constexpr double kHorizonBand = 0.12;
-constexpr double kGrownMaxShift = 0.1;
 
 // `rim_band`: the rim is the share of rays whose strongest edge within this share of the
 // radius lies on the circle (the band the circle was refined in: a grown outline keeps its
@@ -462,9 +466,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
         from = round_best;
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
-      // A grown proposal stands for an outline concentric with the circle it grew from (up to
-      // the pinhole's shift of the mirrored horizon: 0.08 of the radius); one that wandered
-      // off has found another object's edge.
+      // A grown proposal stands for an outline concentric with the circle it grew from.
       if (generation[pi] > 0 &&
           (best.centre_px - rough.centre_px).norm() > kGrownMaxShift * rough.radius_px) {
         continue;
