@@ -431,6 +431,18 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
     for (std::size_t pi = 0; pi < raw.size(); ++pi) {
       const Circle rough = raw[pi];
       const double band = bands[pi];
+      // Grown proposals come after Hough's: where a candidate that counts as a sphere and keeps
+      // every light above the plane already surrounds the circle this one grew from, the walk
+      // has its end.
+      if (generation[pi] > 0) {
+        const bool enclosed = std::any_of(all.begin(), all.end(), [&](const SphereCandidate& o) {
+          return o.below_plane_spots == 0 && o.score >= opt.min_score &&
+                 o.circle.radius_px > parent_radius[pi] &&
+                 (o.circle.centre_px - rough.centre_px).norm() <
+                     kGrownMaxShift * o.circle.radius_px;
+        });
+        if (enclosed) continue;
+      }
       // Refined on the stretched composites' edge. What stays still (the median, the
       // reference photo) comes first: the maximum and mean also hold the moving highlights'
       // flares. The first with a rim on 30% of the rays is kept, else the best. Rays cast
