@@ -1184,6 +1184,7 @@ TEST(CalibSphereStack, AnOffAxisSphereIsFittedAsThePinholeSeesIt) {
 // edge is wide misplaced the rim, and the circle was 1.1 px off here (0.5-1.0 px on JPEG
 // captures of 12 lights).
 TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOfAPixel) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoImages p = render_photo("photo-large-sphere", "rings:45:3", 2, 0, 2560, 1440);
   StackCalibrationOptions o;
   o.rig.detection.camera.focal_px = p.options.focal_px;
