@@ -108,12 +108,19 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
 
 }  // namespace
 
+constexpr const char* kUsage =
+    "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
+    "[--spheres-material M] [--environment dark|lit] [PRESET[:SEED,...] ...]\n";
+
 int main(int argc, char** argv) {
   try {
     if (argc < 2) {
-      std::fprintf(stderr,
-                   "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
-                   "[--spheres-material M] [--environment dark|lit] [PRESET[:SEED,...] ...]\n");
+      std::fputs(kUsage, stderr);
+      return 2;
+    }
+    // A flag in the work folder's place (--help) is not a folder to write renders into.
+    if (argv[1][0] == '-') {
+      std::fputs(kUsage, stderr);
       return 2;
     }
     const fs::path work = argv[1];
