@@ -620,6 +620,61 @@ TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
   }
 }
 
+// Glass marbles in a lit room: the limb mirrors the floor beside the marble, which the marble
+// shades, so the median of the stack shows a sharp ring at 0.91 of the radius and only a faint
+// outline outside it; the mean and the maximum show the outline. Taken as the outline, that
+// ring put every light 5 degrees off and nothing warned. Of two concentric rims each on most
+// rays, the outer is the outline (an edge inside a sphere's outline is common: mirrored
+// surroundings, the horizon); the report says which rim was passed over. The outline is
+// measured on the mean, blurred by what moves in the stack: the radius is held to 1% (the
+// ring is 9% off), the centre to the target.
+TEST(CalibSphereStack, GlassMarblesInALitRoomAreNotTakenForTheRingInsideTheirLimb) {
+  PhotoImages p;
+  p.options = synth::photo_preset_options("photo-glass");
+  p.options.lights = kEightLights;
+  p.options.environment = synth::PhotoEnvironment::kLit;
+  const synth::PhotoRenderer renderer(p.options);
+  p.truth = renderer.truth();
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    p.images.push_back(renderer.render(static_cast<int>(i)));
+    p.names.emplace_back("glass" + std::to_string(i) + ".jpg");
+  }
+  const StackCalibration r = calibrate_photo(p, 2);
+  ASSERT_EQ(r.rig.spheres.size(), 2u);
+  double sum = 0.0, worst = 0.0;
+  int used = 0;
+  for (std::size_t s = 0; s < 2; ++s) {
+    const Circle& c = r.rig.spheres[s].sphere;
+    const synth::SphereOutline& t = p.truth.spheres[s].outline;
+    const double off = (c.centre_px - t.centre_px).norm();
+    const double rel = std::abs(c.radius_px - t.radius_px) / t.radius_px;
+    std::printf("glass lit, sphere %zu: centre off %.3f px, radius off %.3f%%\n", s, off,
+                100.0 * rel);
+    EXPECT_LE(off, kCentreTargetPx);
+    EXPECT_LE(rel, 0.01);
+    EXPECT_EQ(r.rig.spheres[s].usable(), 8);
+  }
+  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
+    if (!r.rig.lights[i].found) continue;
+    const double e = angle_deg(r.rig.lights[i].direction, p.truth.light_dirs[i]);
+    sum += e;
+    worst = std::max(worst, e);
+    ++used;
+  }
+  ASSERT_EQ(used, 8);
+  std::printf("glass lit: lights mean %.2f, worst %.2f deg\n", sum / used, worst);
+  // The ring put them 5 degrees off; the targets (0.2 / 1) are not met in a lit room yet
+  // (docs/CALIBRATION.md), the goal on real photographs is a mean within 1 degree.
+  EXPECT_LE(sum / used, 1.0);
+  int passed_over = 0;
+  for (const SphereCandidate& cand : r.candidates) {
+    if (cand.chosen && cand.note.find("outside a concentric rim") != std::string::npos) {
+      ++passed_over;
+    }
+  }
+  EXPECT_EQ(passed_over, 2);
+}
+
 // One black glossy sphere filling most of the frame, its top cut by the frame and its bottom
 // hidden by the pedestal, in a dark room: the first circles proposed are well off, and rays
 // cast from a centre that far off cross the rim obliquely; the refinement is repeated from
