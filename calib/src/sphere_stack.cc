@@ -219,15 +219,14 @@ constexpr double kRimRefineBand = 0.12;
 // glossy ball shows its surroundings mirrored at the limb (the cup or cloth beside it at about
 // 0.9 r), and a glass marble in a lit room a sharp ring at 0.91 r where its limb stops
 // mirroring the lit floor and starts mirroring the floor it shades (the stack's median shows
-// that ring on more rays than the faint outline outside it). So where the rim taken is
-// supported on at least kConcentricRimMin of the rays and a composite shows a rim of its own
-// outside it (more than kConcentricRimGap further out, within kRimRefineBand) on at least as
-// many, which keeps the candidate's lights above the sample plane, the outer is the outline.
-// On the photographic renders at 640 x 360 (seeds 1-3, dark and lit rooms) only glass in a lit
-// room shows such an outer rim (the mean: 0.64-0.94 of the rays, 8 and 22 lights); the edge of
-// the glow and caustics around glass in a dark room reaches 0.50 (1280 x 720, 12 lights, four
-// 80 degrees up), and a cup or a shadow around the other presets' spheres lies beyond the band
-// (1.15-1.18 r) or on at most 0.4.
+// that ring on more rays than the faint outline outside it). So where a composite shows a rim
+// of its own outside the rim taken (more than kConcentricRimGap further out, within
+// kRimRefineBand) on at least kConcentricRimMin of the rays, keeping the candidate's lights
+// above the sample plane, the outer is the outline. On the photographic renders (640 x 360 and
+// 2560 x 1440, seeds 1-3, dark and lit rooms) only glass in a lit room shows such a rim (the
+// mean: 0.64-1.00 of the rays); the edge of the glow and caustics around glass in a dark room
+// reaches 0.50 (1280 x 720, 12 lights, four 80 degrees up), and a cup or a shadow around the
+// other presets' spheres lies beyond the band (1.15-1.18 r) or on at most 0.4.
 constexpr double kConcentricRimMin = 0.6;
 constexpr double kConcentricRimGap = 0.03;
 
@@ -692,18 +691,23 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
   return out;
 }
 
-// The rim circle near `around` on a composite (contrast-stretched, of the logarithm if asked;
-// smoothed by a 1 px Gaussian): the consensus of the strongest edges on 360 rays, refitted to
-// the points against brighter surroundings where both kinds are present; circles are fitted
-// in `op` (the outline under the camera: OutlinePlane). `rim`: the share of rays supporting it;
-// `tight`: the share whose edge lies within kTightRimPx of it (how sharp a rim the plane shows).
-Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
-                  const OutlinePlane& op, double* rim, double* tight = nullptr,
-                  double band = kRimRefineBand) {
+// A composite contrast-stretched (of the logarithm if asked) and smoothed by a 1 px Gaussian:
+// what rim_circle and outer_rim look for edges on.
+cv::Mat smoothed(const cv::Mat& plane, bool logarithm) {
   cv::Mat f = stretch(plane, CV_32F, logarithm);
   cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
+  return f;
+}
+
+// The rim circle near `around` on a composite prepared by smoothed(): the consensus of the
+// strongest edges on 360 rays, refitted to the points against brighter surroundings where both
+// kinds are present; circles are fitted in `op` (the outline under the camera: OutlinePlane).
+// `rim`: the share of rays supporting it; `tight`: the share whose edge lies within kTightRimPx of
+// it (how sharp a rim the plane shows).
+Circle rim_circle(const cv::Mat& f, const Circle& around, const OutlinePlane& op, double* rim,
+                  double* tight = nullptr) {
   int inside = 0;
-  auto e = ray_edges(f, around.centre_px, around.radius_px, &inside, band);
+  auto e = ray_edges(f, around.centre_px, around.radius_px, &inside, kRimRefineBand);
   for (Eigen::Vector2d& p : e) p = op.to(p);
   Circle r = op.from(consensus_circle(e, op.to(around), rim, kRimChoiceTolPx));
   rim_against_brighter(f, op, &r);
@@ -719,13 +723,12 @@ Circle rim_circle(const cv::Mat& plane, bool logarithm, const Circle& around,
   return r;
 }
 
-// A rim outside `inner` on a composite: per ray, the strongest edge between inner's radius plus
-// max(2 px, kConcentricRimGap r) and (1 + kRimRefineBand) r that is an edge of its own (the
-// gradient falls below half its height between it and inner's rim, so inner's blurred flank is
-// not taken), and the circle those edges agree on; `rim`: the share of rays supporting it.
-Circle outer_rim(const cv::Mat& plane, const Circle& inner, const OutlinePlane& op, double* rim) {
-  cv::Mat f = stretch(plane, CV_32F, false);
-  cv::GaussianBlur(f, f, cv::Size(0, 0), 1.0);
+// A rim outside `inner` on a composite prepared by smoothed() (linear): per ray, the strongest edge
+// between inner's radius plus max(2 px, kConcentricRimGap r) and (1 + kRimRefineBand) r that is an
+// edge of its own (the gradient falls below half its height between it and inner's rim, so inner's
+// blurred flank is not taken), and the circle those edges agree on; `rim`: the share of rays
+// supporting it.
+Circle outer_rim(const cv::Mat& f, const Circle& inner, const OutlinePlane& op, double* rim) {
   constexpr int kRays = 360;
   const double r0 = inner.radius_px;
   const double step = std::clamp(r0 / 200.0, 0.35, 1.0);
@@ -858,7 +861,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       for (const bool logarithm : {false, true}) {
         for (const auto& [name, plane] : planes) {
           double rim = 0.0, tight = 0.0;
-          const Circle r = rim_circle(*plane, logarithm, c, photo_plane, &rim, &tight);
+          const Circle r = rim_circle(smoothed(*plane, logarithm), c, photo_plane, &rim, &tight);
           if (rim > best_rim && near_candidate(r)) {
             best_rim = rim;
             best_tight = tight;
@@ -882,7 +885,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       auto still_rim = [&](const cv::Mat& plane, const OutlinePlane& op, bool must_be_near) {
         StillRim sr;
         for (const bool logarithm : {false, true}) {
-          const Circle r = rim_circle(plane, logarithm, cs, op, &sr.rim, &sr.tight);
+          const Circle r = rim_circle(smoothed(plane, logarithm), cs, op, &sr.rim, &sr.tight);
           if (sr.rim < 0.3) continue;
           sr.circle = to_photo(r, ev.scale);
           sr.found = must_be_near ? near_candidate(sr.circle) : keeps_lights_above(sr.circle);
@@ -910,21 +913,27 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         if (lower.found && (!still.found || lower.tight > still.tight)) still = lower;
         if (still.found && still.rim > best_rim + kBlockMedianRimMargin) best = still.circle;
       }
-      // Of two concentric rims, the outer (kConcentricRimMin).
-      if (best_rim >= kConcentricRimMin) {
+      // Of two concentric rims, the outer (kConcentricRimMin): looked for outside the rim taken
+      // and outside the candidate's circle (the rim taken can mix the ring and the outline,
+      // off the centre of both).
+      {
         const Circle inner = best;
         double outer_best = 0.0;
-        for (const auto& [name, plane] : planes) {
-          double rim = 0.0;
-          const Circle r = outer_rim(*plane, inner, photo_plane, &rim);
-          if (rim >= kConcentricRimMin && rim > outer_best &&
-              (r.centre_px - inner.centre_px).norm() < 0.05 * inner.radius_px &&
-              r.radius_px > (1.0 + kConcentricRimGap) * inner.radius_px && keeps_lights_above(r)) {
-            outer_best = rim;
-            best = r;
+        for (const Circle& from : {inner, c}) {
+          for (const auto& [name, plane] : planes) {
+            double rim = 0.0;
+            const Circle r = outer_rim(smoothed(*plane, false), from, photo_plane, &rim);
+            if (rim >= kConcentricRimMin && rim > outer_best &&
+                (r.centre_px - from.centre_px).norm() < 0.05 * from.radius_px &&
+                r.radius_px > (1.0 + kConcentricRimGap) * from.radius_px &&
+                r.radius_px > (1.0 + kConcentricRimGap) * inner.radius_px &&
+                keeps_lights_above(r)) {
+              outer_best = rim;
+              best = r;
+            }
           }
         }
-        if (best.radius_px != inner.radius_px) {
+        if (outer_best > 0.0) {
           char buf[160];
           std::snprintf(buf, sizeof(buf),
                         "; outline at r %.1f px, outside a concentric rim at r %.1f px",
