@@ -418,6 +418,15 @@ struct PhotoImages {
   std::vector<fs::path> names;
 };
 constexpr const char* kEightLights = "rings:15:3,40:3,65:2";
+// Renders every light of p->options; the images are named `prefix` and the light's index.
+void render_all(PhotoImages* p, const std::string& prefix) {
+  const synth::PhotoRenderer renderer(p->options);
+  p->truth = renderer.truth();
+  for (std::size_t i = 0; i < p->truth.light_dirs.size(); ++i) {
+    p->images.push_back(renderer.render(static_cast<int>(i)));
+    p->names.emplace_back(prefix + std::to_string(i) + ".jpg");
+  }
+}
 // `width` > 0: rendered at width x height (the scene kept, the focal length scaled).
 PhotoImages render_photo(const std::string& preset, const std::string& lights,
                          std::uint64_t seed = 1, std::size_t spheres = 0, int width = 0,
@@ -428,12 +437,7 @@ PhotoImages render_photo(const std::string& preset, const std::string& lights,
   p.options.seed = seed;
   if (spheres > 0) p.options.spheres.resize(spheres);
   if (width > 0) synth::resize_photo(width, height, &p.options);
-  const synth::PhotoRenderer renderer(p.options);
-  p.truth = renderer.truth();
-  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-    p.images.push_back(renderer.render(static_cast<int>(i)));
-    p.names.emplace_back(preset + std::to_string(i) + ".jpg");
-  }
+  render_all(&p, preset);
   return p;
 }
 // Every channel clipped (1) within `radius` pixels of `centre`.
@@ -587,12 +591,7 @@ TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
         s.material = synth::parse_sphere_material(k.material);
       }
     }
-    const synth::PhotoRenderer renderer(p.options);
-    p.truth = renderer.truth();
-    for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-      p.images.push_back(renderer.render(static_cast<int>(i)));
-      p.names.emplace_back("lit" + std::to_string(i) + ".jpg");
-    }
+    render_all(&p, "lit");
     const StackCalibration r = calibrate_photo(p, 2);
     ASSERT_EQ(r.rig.spheres.size(), 2u) << k.preset;
     bool horizon_seen = false;
@@ -633,12 +632,7 @@ TEST(CalibSphereStack, GlassMarblesInALitRoomAreNotTakenForTheRingInsideTheirLim
   p.options = synth::photo_preset_options("photo-glass");
   p.options.lights = kEightLights;
   p.options.environment = synth::PhotoEnvironment::kLit;
-  const synth::PhotoRenderer renderer(p.options);
-  p.truth = renderer.truth();
-  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-    p.images.push_back(renderer.render(static_cast<int>(i)));
-    p.names.emplace_back("glass" + std::to_string(i) + ".jpg");
-  }
+  render_all(&p, "glass");
   const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
   double sum = 0.0, worst = 0.0;

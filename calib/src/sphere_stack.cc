@@ -742,13 +742,7 @@ Circle outer_rim(const cv::Mat& f, const Circle& inner, const OutlinePlane& op, 
     for (double t = r0; t <= (1.0 + kRimRefineBand) * r0; t += step) {
       const Eigen::Vector2d p = inner.centre_px + t * dir;
       if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
-      const int x0 = static_cast<int>(p.x()), y0 = static_cast<int>(p.y());
-      const double fx = p.x() - x0, fy = p.y() - y0;
-      const float* a0 = f.ptr<float>(y0);
-      const float* a1 = f.ptr<float>(std::min(y0 + 1, f.rows - 1));
-      const int x1 = std::min(x0 + 1, f.cols - 1);
-      prof.push_back((1 - fy) * ((1 - fx) * a0[x0] + fx * a0[x1]) +
-                     fy * ((1 - fx) * a1[x0] + fx * a1[x1]));
+      prof.push_back(sample_bilinear(f, p));
     }
     if (prof.size() < 5) continue;
     g.assign(prof.size(), 0.0);

@@ -93,13 +93,7 @@ std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& 
     for (double t = t0; t <= (1.0 + band) * r; t += step) {
       const Eigen::Vector2d p = c + t * dir;
       if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
-      const int x0 = static_cast<int>(p.x()), y0 = static_cast<int>(p.y());
-      const double fx = p.x() - x0, fy = p.y() - y0;
-      const float* r0 = f.ptr<float>(y0);
-      const float* r1 = f.ptr<float>(std::min(y0 + 1, f.rows - 1));
-      const int x1 = std::min(x0 + 1, f.cols - 1);
-      prof.push_back((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) +
-                     fy * ((1 - fx) * r1[x0] + fx * r1[x1]));
+      prof.push_back(sample_bilinear(f, p));
     }
     double best = 0.0;
     std::size_t bi = 0;

@@ -204,6 +204,16 @@ inline Eigen::Vector2d small_px(const Eigen::Vector2d& photo, double scale) {
 // An analysis-size circle (and its outline points) in photo pixels.
 Circle to_photo(const Circle& small, int scale);
 
+// A CV_32F plane at p by bilinear interpolation; p within [0, cols - 1) x [0, rows - 1).
+inline double sample_bilinear(const cv::Mat& f, const Eigen::Vector2d& p) {
+  const int x0 = static_cast<int>(p.x()), y0 = static_cast<int>(p.y());
+  const double fx = p.x() - x0, fy = p.y() - y0;
+  const float* r0 = f.ptr<float>(y0);
+  const float* r1 = f.ptr<float>(std::min(y0 + 1, f.rows - 1));
+  const int x1 = std::min(x0 + 1, f.cols - 1);
+  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+}
+
 // Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
 // (1 + band) r of the smoothed composite `f`; `inside` counts the rays that stay in the frame.
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
