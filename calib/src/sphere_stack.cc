@@ -913,10 +913,11 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       {
         const Circle inner = best;
         double outer_best = 0.0;
-        for (const Circle& from : {inner, c}) {
-          for (const auto& [name, plane] : planes) {
+        for (const auto& [name, plane] : planes) {
+          const cv::Mat f = smoothed(*plane, false);  // once per composite, for both circles
+          for (const Circle& from : {inner, c}) {
             double rim = 0.0;
-            const Circle r = outer_rim(smoothed(*plane, false), from, photo_plane, &rim);
+            const Circle r = outer_rim(f, from, photo_plane, &rim);
             if (rim >= kConcentricRimMin && rim > outer_best &&
                 (r.centre_px - from.centre_px).norm() < 0.05 * from.radius_px &&
                 r.radius_px > (1.0 + kConcentricRimGap) * from.radius_px &&
