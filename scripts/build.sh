@@ -19,8 +19,8 @@ btype=Release
 bench=ON
 extra=()
 if [ "$sanitize" = ON ]; then
-  # The sanitizer build is clang's and also builds the libFuzzer targets (every target
-  # instrumented for coverage): scripts/fuzz.sh then runs them from this folder without a
+  # The sanitizer build is clang's and also builds the libFuzzer targets (the parsers'
+  # code instrumented for coverage): scripts/fuzz.sh then runs them from this folder without a
   # build of its own.
   btype=RelWithDebInfo
   bench=OFF

@@ -540,6 +540,7 @@ TEST(CalibSphereStack, ASecondSpotThatAgreesWithTheOtherSphereIsTaken) {
 // Chrome spheres with a glazed dish beside them: the dish's glint moves with the light too,
 // but does not reflect the lights as the spheres do, so it is refused.
 TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoRun run = calibrate_photo_preset("photo-chrome");
   for (const SphereCandidate& c : run.result.candidates) {
     if ((c.circle.centre_px - run.truth.distractor_centre_px).norm() <
@@ -573,6 +574,7 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
 // so there the radius is held to what tells the outline from the horizon (2%), the chrome
 // spheres to the targets.
 TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   struct Case {
     const char* preset;
     const char* material;  // nullptr: the preset's
@@ -628,6 +630,7 @@ TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
 // measured on the mean, blurred by what moves in the stack: the radius is held to 1% (the
 // ring is 9% off), the centre to the target.
 TEST(CalibSphereStack, GlassMarblesInALitRoomAreNotTakenForTheRingInsideTheirLimb) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p;
   p.options = synth::photo_preset_options("photo-glass");
   p.options.lights = kEightLights;
@@ -745,6 +748,7 @@ LargeSphereRun calibrate_large_sphere(std::uint64_t seed) {
 // 1.19 px and 0.82 degrees with the whole rim chosen within a pixel; 0.10 px and 0.19 degrees
 // with the rim against brighter surroundings).
 TEST(CalibSphereStack, PhotoLargeSphereWithAWindowAlongItsLimb) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const LargeSphereRun run = calibrate_large_sphere(3);
   ASSERT_EQ(run.result.rig.spheres.size(), 1u);
   ASSERT_GT(run.used, 0);
@@ -765,6 +769,7 @@ TEST(CalibSphereStack, PhotoLargeSphereWithAWindowAlongItsLimb) {
 // three of them were written as lights 35-61 degrees off. Every hidden light is dropped, saying
 // why, and every light written is within the targets.
 TEST(CalibSphereStack, ALightHiddenFromTheCameraIsNotTakenFromTheLitScene) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const LargeSphereRun run = calibrate_large_sphere(5);
   ASSERT_EQ(run.result.rig.spheres.size(), 1u);
   const SphereReport& sphere = run.result.rig.spheres[0];
@@ -792,6 +797,7 @@ TEST(CalibSphereStack, ALightHiddenFromTheCameraIsNotTakenFromTheLitScene) {
 // reflecting to below the plane) and a comparable second spot is usable, the second is taken
 // and stays doubtful: every light is usable and none is the hot spot.
 TEST(CalibSphereStack, OneGlassMarbleHasEveryLight) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   const PhotoImages p = render_photo("photo-glass", "", 1, 1);
   const StackCalibration r = calibrate_photo(p, 1);
   ASSERT_EQ(r.rig.spheres.size(), 1u);
@@ -856,6 +862,7 @@ TEST(CalibSphereStack, SphereMaterialDecidedFromTheSecondSpots) {
 // mostly the reflection. The light's core is still the part that is not clipped in the
 // stack's median, and its centre is found from its own edge.
 TEST(CalibSphereStack, ACoreMergedWithAStaticClippedReflectionIsCutFromIt) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p = render_photo("photo-chrome", kEightLights);
   const synth::PhotoTruth& truth = p.truth;
   const int target = 4;
@@ -918,6 +925,7 @@ TEST(CalibSphereStack, AHaloOverAMirroredWindowIsMeasuredInLinearLight) {
 // the light at elevation 15 degrees facing the spheres' bottoms): the clip is reached further
 // out on that side, and the core's edge moves; its halo's symmetry does not.
 TEST(CalibSphereStack, ACoreOverAnUnevenBackgroundIsCentredByItsHalo) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   check_light("photo-chrome", 1, 3, "core over an uneven background", kUnevenBackgroundPx);
 }
 
@@ -977,6 +985,7 @@ namespace {
 // clip in one image by the light's glow. Clipped there and thicker than the light's core, it
 // was taken for it (12 px off); a core's thickness counts only pixels dark in the median.
 TEST(CalibSphereStack, ALampLiftedToTheClipByTheLightsGlowIsNotTheCore) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p = render_photo("photo-chrome", kEightLights);
   const int target = 4;
   const synth::PhotoSphereTruth& s0 = p.truth.spheres[0];
@@ -1259,6 +1268,7 @@ TEST(CalibSphereStack, ALargeSphereAtTwentyFiveHundredPixelsIsFoundToAFractionOf
 // candidates and draws them, and writes no light file; --allow-disagreement writes the lights,
 // flagged.
 TEST(CalibSphereStack, CommandRefusesSpheresThatDisagreeAboutMostLights) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   test::ScratchDir dir;
   const synth::PhotoOptions po = glass_photo_options("rings:20:4,75:6,84:4", 960, 540);
   const std::vector<fs::path> photos = render_photo_files(po, dir.path());
@@ -1279,6 +1289,7 @@ TEST(CalibSphereStack, CommandRefusesSpheresThatDisagreeAboutMostLights) {
 }
 
 TEST(CalibSphereStack, CommandTakesTheFocalLengthFromThePhotographsExif) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   test::ScratchDir dir;
   const auto s = test::run_ptmkit({"synth", "--preset", "photo-dome", "--lights", kEightLights,
                                    "--out", (dir / "cap").string()});

@@ -12,6 +12,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/parallel.h"
 #include "ptmkit/synth/photo.h"
+#include "test_util.h"
 #include "tolerances.h"
 
 namespace {
@@ -187,6 +188,7 @@ V2 core_centroid(const Image& a, const Image* b, const V2& near, int r, bool lin
 }
 
 TEST(SynthPhoto, ChromeHighlightsLieWhereMirrorGeometryPutsThem) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   // Without the lens's spread: the light's image on the sphere (the difference of two
   // images whose highlights are far apart) centred on the truth to a few hundredths.
   PhotoOptions o = ptmkit::synth::photo_preset_options("photo-chrome");
@@ -371,6 +373,7 @@ TEST(SynthPhoto, ReflectionsOfTheRoomAndSceneAreStatic) {
 }
 
 TEST(SynthPhoto, GlassShowsAHotSpotThatIsNoMirrorReflection) {
+  PTMKIT_RELEASE_BUILD_ONLY();
   PhotoOptions o = ptmkit::synth::photo_preset_options("photo-glass");
   o.lights = "rings:60:4:10";
   o.artefacts.flare = false;

@@ -17,10 +17,10 @@ inline constexpr bool kSanitizedBuild = true;
 inline constexpr bool kSanitizedBuild = false;
 #endif
 
-// The first statement of an accuracy test on a large render (a full calibration of a
-// photo-size capture): under the sanitizers each takes minutes, so they run in the release
-// build only, and the sanitizer build checks the same calibration code on the suite's smaller
-// renders.
+// The first statement of a test that renders or calibrates a photo-size capture (an accuracy
+// figure, or a refusal only such a capture shows): under the sanitizers each takes a minute or
+// more, so they run in the release build only, and the sanitizer build checks the same render
+// and calibration code on the suite's smaller captures.
 #define PTMKIT_RELEASE_BUILD_ONLY()                                                    \
   do {                                                                                 \
     if (::ptmkit::test::kSanitizedBuild) {                                             \
