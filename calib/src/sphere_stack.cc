@@ -9,6 +9,7 @@
 #include <functional>
 #include <numbers>
 #include <optional>
+#include <utility>
 
 #include <tbb/parallel_for.h>
 #include <Eigen/Dense>
@@ -738,12 +739,7 @@ Circle outer_rim(const cv::Mat& f, const Circle& inner, const OutlinePlane& op, 
   for (int k = 0; k < kRays; ++k) {
     const double a = 2.0 * std::numbers::pi * k / kRays;
     const Eigen::Vector2d dir(std::cos(a), std::sin(a));
-    prof.clear();
-    for (double t = r0; t <= (1.0 + kRimRefineBand) * r0; t += step) {
-      const Eigen::Vector2d p = inner.centre_px + t * dir;
-      if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
-      prof.push_back(sample_bilinear(f, p));
-    }
+    ray_profile(f, inner.centre_px, dir, r0, (1.0 + kRimRefineBand) * r0, step, &prof);
     if (prof.size() < 5) continue;
     g.assign(prof.size(), 0.0);
     for (std::size_t i = 1; i + 1 < prof.size(); ++i) {
@@ -977,9 +973,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       if (!spots.empty()) brightest.push_back(b);
     }
     if (brightest.empty()) continue;
-    const auto q = static_cast<std::ptrdiff_t>(3 * (brightest.size() - 1) / 4);
-    std::nth_element(brightest.begin(), brightest.begin() + q, brightest.end());
-    light_lift[k] = brightest[static_cast<std::size_t>(q)];
+    light_lift[k] = highlight_lift(std::move(brightest));
     for (std::size_t ii = 0; ii < spots_of[k].size(); ++ii) {
       std::vector<Spot>& spots = spots_of[k][ii];
       for (const Spot& sp : spots) faint_lift[k][ii] = std::max(faint_lift[k][ii], sp.lift_linear);

@@ -88,13 +88,8 @@ std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& 
     const Eigen::Vector2d near = c + 1.02 * r * dir;
     if (near.x() < 1 || near.y() < 1 || near.x() > f.cols - 2 || near.y() > f.rows - 2) continue;
     ++*inside;
-    prof.clear();
     const double t0 = (1.0 - band) * r;
-    for (double t = t0; t <= (1.0 + band) * r; t += step) {
-      const Eigen::Vector2d p = c + t * dir;
-      if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
-      prof.push_back(sample_bilinear(f, p));
-    }
+    ray_profile(f, c, dir, t0, (1.0 + band) * r, step, &prof);
     double best = 0.0;
     std::size_t bi = 0;
     for (std::size_t i = 1; i + 1 < prof.size(); ++i) {
@@ -304,10 +299,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   // centre from the reflection).
   out.light_spots_px.assign(static_cast<std::size_t>(ev.n), {});
   if (!lifts.empty()) {
-    std::vector<double> sorted = lifts;
-    const auto q = static_cast<std::ptrdiff_t>(3 * (sorted.size() - 1) / 4);
-    std::nth_element(sorted.begin(), sorted.begin() + q, sorted.end());
-    const double light_lift = sorted[static_cast<std::size_t>(q)];
+    const double light_lift = highlight_lift(lifts);
     for (std::size_t i = 0; i < spots_of.size(); ++i) {
       for (const Spot& sp : spots_of[i]) {
         if (sp.lift_linear >= kLightLiftShare * light_lift &&
@@ -417,21 +409,28 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
         add_hough(comp.small8(reg), lo, std::min(hi, lo * 2.5), reg.tl(), &raw);
       }
     }
-    // Per proposal: how many steps outward it was grown (0: Hough's) and the share of its
-    // radius its refinement looks within.
-    std::vector<int> generation(raw.size(), 0);
-    std::vector<double> bands(raw.size(), 0.3);
-    std::vector<double> parent_radius(raw.size(), 0.0);  // grown: the radius it grew from
-    for (std::size_t pi = 0; pi < raw.size(); ++pi) {
-      const Circle rough = raw[pi];
-      const double band = bands[pi];
+    // The proposals: Hough's, then those grown outward from them (appended while the queue is
+    // walked, so it is indexed, not iterated).
+    struct Proposal {
+      Circle rough;
+      int generation = 0;          // how many steps outward it was grown (0: Hough's)
+      double band = 0.3;           // the share of its radius its refinement looks within
+      double parent_radius = 0.0;  // grown: the radius it grew from
+    };
+    std::vector<Proposal> queue;
+    queue.reserve(raw.size());
+    for (const Circle& c : raw) queue.push_back(Proposal{c});
+    for (std::size_t pi = 0; pi < queue.size(); ++pi) {
+      const Proposal prop = queue[pi];
+      const Circle& rough = prop.rough;
+      const double band = prop.band;
       // Grown proposals come after Hough's: where a candidate that counts as a sphere and keeps
       // every light above the plane already surrounds the circle this one grew from, the walk
       // has its end.
-      if (generation[pi] > 0) {
+      if (prop.generation > 0) {
         const bool enclosed = std::any_of(all.begin(), all.end(), [&](const SphereCandidate& o) {
           return o.below_plane_spots == 0 && o.score >= opt.min_score &&
-                 o.circle.radius_px > parent_radius[pi] &&
+                 o.circle.radius_px > prop.parent_radius &&
                  (o.circle.centre_px - rough.centre_px).norm() <
                      kGrownMaxShift * o.circle.radius_px;
         });
@@ -473,7 +472,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
       // A grown proposal stands for an outline concentric with the circle it grew from.
-      if (generation[pi] > 0 &&
+      if (prop.generation > 0 &&
           (best.centre_px - rough.centre_px).norm() > kGrownMaxShift * rough.radius_px) {
         continue;
       }
@@ -488,27 +487,24 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
       // circles whose rim and track would make them a sphere are grown.
       const bool would_count = std::min(1.0, scored.rim / 0.3) * scored.track >= opt.min_score;
       // A step that found no edge beyond the circle it grew from ends its walk.
-      const bool moved_out = generation[pi] == 0 || best.radius_px > 1.02 * parent_radius[pi];
+      const bool moved_out = prop.generation == 0 || best.radius_px > 1.02 * prop.parent_radius;
       if (scored.below_plane_spots > 0 && would_count && moved_out &&
-          generation[pi] < kMaxGrowSteps) {
+          prop.generation < kMaxGrowSteps) {
         const auto grow = [&](double factor, double grown_band) {
           Circle q;
           q.centre_px = best.centre_px;
           q.radius_px = best.radius_px * factor;
           // Proposals refined to the same circle grow the same way: once is enough.
-          for (std::size_t k = 0; k < raw.size(); ++k) {
-            if (generation[k] > 0 && (raw[k].centre_px - q.centre_px).norm() < 0.5 &&
-                std::abs(raw[k].radius_px - q.radius_px) < 0.5) {
+          for (const Proposal& o : queue) {
+            if (o.generation > 0 && (o.rough.centre_px - q.centre_px).norm() < 0.5 &&
+                std::abs(o.rough.radius_px - q.radius_px) < 0.5) {
               return;
             }
           }
-          raw.push_back(q);
-          generation.push_back(generation[pi] + 1);
-          bands.push_back(grown_band);
-          parent_radius.push_back(best.radius_px);
+          queue.push_back(Proposal{q, prop.generation + 1, grown_band, best.radius_px});
         };
         grow(kGrowStep, kGrowStep - 1.0 - 0.02);
-        if (generation[pi] == 0) grow(kHorizonGrow, kHorizonBand);
+        if (prop.generation == 0) grow(kHorizonGrow, kHorizonBand);
       }
       // Of two proposals that refine to about the same circle, the one that keeps more lights
       // above the sample plane stays, else the better supported.

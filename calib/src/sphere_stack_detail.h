@@ -163,6 +163,15 @@ inline double to_linear(double v, bool srgb) {
 // and the brightest such spot by at most 0.11.
 inline constexpr double kLightLiftShare = 0.25;
 
+// What a sphere's highlights lift it by, the reference of kLightLiftShare: the upper quartile
+// (the 3 (n - 1) / 4-th smallest) of the lifts of its brightest spots; 0 for none.
+inline double highlight_lift(std::vector<double> lifts) {
+  if (lifts.empty()) return 0.0;
+  const auto q = static_cast<std::ptrdiff_t>(3 * (lifts.size() - 1) / 4);
+  std::nth_element(lifts.begin(), lifts.begin() + q, lifts.end());
+  return lifts[static_cast<std::size_t>(q)];
+}
+
 // A light reflects off a sphere lying on the sample plane only from above the plane, so a
 // circle that puts a light's reflection below it (by more than this elevation, degrees:
 // noise on a light at the horizon) is not the sphere's outline.
@@ -212,6 +221,18 @@ inline double sample_bilinear(const cv::Mat& f, const Eigen::Vector2d& p) {
   const float* r1 = f.ptr<float>(std::min(y0 + 1, f.rows - 1));
   const int x1 = std::min(x0 + 1, f.cols - 1);
   return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+}
+
+// The profile of `f` along a ray, c + t dir for t = t0, t0 + step, ... <= t1, bilinear, ending
+// where the ray leaves the frame: what the rim searches find their edges on.
+inline void ray_profile(const cv::Mat& f, const Eigen::Vector2d& c, const Eigen::Vector2d& dir,
+                        double t0, double t1, double step, std::vector<double>* prof) {
+  prof->clear();
+  for (double t = t0; t <= t1; t += step) {
+    const Eigen::Vector2d p = c + t * dir;
+    if (p.x() < 0 || p.y() < 0 || p.x() > f.cols - 1.001 || p.y() > f.rows - 1.001) break;
+    prof->push_back(sample_bilinear(f, p));
+  }
 }
 
 // Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
