@@ -216,6 +216,7 @@ void run_sphere(const SphereArgs& args) {
     if (s.sphere_detected) std::printf(", score %.2f", score);
     std::printf(")\n");
   }
+  if (!result.search_note.empty()) std::printf("  %s\n", result.search_note.c_str());
   if (result.two_spot_images > 0) {
     std::printf("  %d of %zu images show two moving spots on a sphere; treated as %s (%s)\n",
                 result.two_spot_images, files.size(), calib::to_string(result.material),
@@ -314,8 +315,10 @@ void add_calibrate_command(CLI::App& root) {
                  "Also write every light as JSON (directions, positions in mm)");
   sp->add_flag("--allow-disagreement", sphere->allow_disagreement,
                "Write the lights even where two or more spheres found, with a focal length, "
-               "disagree about more than three quarters of them (by default an error listing "
-               "the candidates: such spheres are most likely not the capture's)");
+               "disagree about more than three quarters of them (by default the search is made "
+               "once more, outlines kept near their proposals and spheres chosen by a 5-degree "
+               "agreement, and if those disagree too it is an error listing the candidates: such "
+               "spheres are most likely not the capture's)");
   sp->add_flag("--distant-lights", sphere->distant_lights,
                "Keep the distant-light model even where the spheres disagree. By default, with "
                "a focal length, 2+ spheres and neither --sphere-radius-mm nor --plane, near "

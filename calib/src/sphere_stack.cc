@@ -774,8 +774,15 @@ struct Want {
   int alternate_rank = -1;
 };
 
+// The spheres found disagree about most lights (kMostLightsDisagree): what run() throws, for
+// run_searches() to try the second search.
+class Disagreement : public SphereSearchError {
+ public:
+  using SphereSearchError::SphereSearchError;
+};
+
 StackCalibration run(const Source& src, const std::vector<fs::path>& names,
-                     const StackCalibrationOptions& options) {
+                     const StackCalibrationOptions& options, bool second_search) {
   const RigOptions& rig = options.rig;
   if (const auto err = rig.validate(); !err.empty()) throw Error("sphere: " + err);
   if (src.count() < 1) throw Error("sphere: no images");
@@ -807,7 +814,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   const bool detected = circles.empty();
   if (detected) {
     std::vector<Circle> small;
-    out.candidates = find_candidates(ev, so, det.min_peak, rig.sphere_count, det.camera, &small);
+    out.candidates =
+        find_candidates(ev, so, det.min_peak, rig.sphere_count, det.camera, &small, second_search);
     // Full-resolution rim: the consensus circle on the photo-size composite where the rim
     // shows best (at scale 1 the analysis already was at full resolution).
     // Still composites first (the median exists at photo size only at scale 1).
@@ -1353,9 +1361,37 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     msg +=
         "\nhelp the search with --roi x,y,w,h (a box per sphere), --radius-range MIN,MAX, "
         "--reference IMG, or give --sphere cx,cy,r; or keep these with --allow-disagreement";
-    throw SphereSearchError(msg, out.candidates);
+    throw Disagreement(msg, out.candidates);
   }
   return out;
+}
+
+// run(), and where the spheres it found disagree about most lights, run() again with the
+// second search (kSlideShare): a second pass over the photographs, made only then. Where the
+// second search refuses too (its spheres disagree, or too few are found), the first refusal
+// stands.
+StackCalibration run_searches(const Source& src, const std::vector<fs::path>& names,
+                              const StackCalibrationOptions& options) {
+  std::string first_message;
+  std::vector<SphereCandidate> first_candidates;
+  try {
+    return run(src, names, options, false);
+  } catch (const Disagreement& first) {
+    first_message = first.what();
+    first_candidates = first.candidates();
+  }
+  try {
+    StackCalibration out = run(src, names, options, true);
+    out.search_note =
+        "the spheres first chosen disagreed about most lights; these are from a second search "
+        "that also refines circles within " +
+        std::to_string(static_cast<int>(kSlideShare * 100.0 + 0.5)) +
+        "% of their radius and chooses the spheres whose lights agree";
+    return out;
+  } catch (const SphereSearchError&) {
+    // Disagreeing again, or too few spheres with a narrower choice: the first refusal says more.
+    throw SphereSearchError(first_message, std::move(first_candidates));
+  }
 }
 
 }  // namespace
@@ -1396,7 +1432,7 @@ StackCalibration calibrate_sphere_stack(const std::vector<fs::path>& files,
   if (files.empty()) throw Error("sphere: no images");
   refuse_masks_among_photos(files);
   const FileSource src(files);
-  return run(src, files, options);
+  return run_searches(src, files, options);
 }
 
 StackCalibration calibrate_sphere_stack(const std::vector<Image>& images,
@@ -1410,7 +1446,7 @@ StackCalibration calibrate_sphere_stack(const std::vector<Image>& images,
     }
   }
   const MemorySource src(images);
-  return run(src, names, options);
+  return run_searches(src, names, options);
 }
 
 const char* to_string(SphereMaterial m) {
@@ -1431,6 +1467,7 @@ std::string StackCalibration::to_json() const {
   j["two_spot_images"] = two_spot_images;
   j["material"] = to_string(material);
   j["material_note"] = material_note;
+  j["search_note"] = search_note;
   j["focal_px"] = camera.focal_px;
   j["focal_source"] = camera.focal_source;
   j["candidates"] = nlohmann::json::array();

@@ -370,7 +370,8 @@ Circle to_photo(const Circle& small, int scale) {
 
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
                                              double min_peak, int count, const SphereCamera& camera,
-                                             std::vector<Circle>* chosen_photo) {
+                                             std::vector<Circle>* chosen_photo,
+                                             bool second_search) {
   std::vector<Composite> comps;
   comps.push_back(make_composite("stack's maximum", ev.small_max));
   comps.push_back(make_composite("stack's mean", ev.small_mean));
@@ -416,6 +417,7 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
       int generation = 0;          // how many steps outward it was grown (0: Hough's)
       double band = 0.3;           // the share of its radius its refinement looks within
       double parent_radius = 0.0;  // grown: the radius it grew from
+      bool narrow = false;         // second search: refined within kSlideShare of its radius
     };
     std::vector<Proposal> queue;
     queue.reserve(raw.size());
@@ -469,6 +471,13 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
         best_rim = round_rim;
         if (moved < 0.5) break;
         from = round_best;
+      }
+      if (second_search && !prop.narrow && prop.generation == 0 &&
+          std::abs(best.radius_px - rough.radius_px) > kSlideShare * rough.radius_px) {
+        Proposal narrow = prop;
+        narrow.band = kSlideShare;
+        narrow.narrow = true;
+        queue.push_back(narrow);
       }
       if (best.radius_px < 0.8 * min_r || best.radius_px > 1.25 * max_r) continue;
       // A grown proposal stands for an outline concentric with the circle it grew from.
@@ -554,7 +563,9 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
   };
   // Agreement of two candidates: the share of their common images whose spots reflect the
   // same light (within the tolerance), 0 with fewer than 3 common images.
-  const double tol_deg = camera.focal_px > 0.0 ? 20.0 : 30.0;
+  const double tol_deg =
+      second_search ? (camera.focal_px > 0.0 ? kStrictAgreementDeg : kStrictAgreementOrthoDeg)
+                    : (camera.focal_px > 0.0 ? 20.0 : 30.0);
   auto agree = [&](const SphereCandidate& a, const SphereCandidate& b) {
     int common = 0, same = 0;
     for (std::size_t i = 0; i < a.spots_px.size(); ++i) {
@@ -590,8 +601,9 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
           }
         }
         // Agreement weighs the choice but refuses nothing alone: near lights (a small dome)
-        // are seen along different directions by spheres far apart.
-        const double value = sum * (0.5 + 0.5 * worst);
+        // are seen along different directions by spheres far apart. The second search weighs
+        // all of it (kSlideShare).
+        const double value = second_search ? sum * worst : sum * (0.5 + 0.5 * worst);
         if (value > best_value) {
           best_value = value;
           best_set = set;

@@ -244,11 +244,24 @@ std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& 
 // that distance instead.
 Circle consensus_circle(const std::vector<Eigen::Vector2d>& pts, const Circle& rough, double* rim,
                         double choose_tol_px = 0.0);
+// The second search, made only when the spheres the first chose disagree about most lights
+// (StackCalibrationOptions::allow_disagreement). A proposal whose refinement slid onto an edge
+// more than kSlideShare of its radius away (a base's or cup's rim around a sphere whose own
+// outline shows on few rays) is also refined within that share of its own radius; and two or
+// three spheres are chosen by the share of their lights that agree within
+// kStrictAgreementDeg (kStrictAgreementOrthoDeg without a focal length), all of the value
+// weighted by it, instead of the first search's wide tolerance, which only weighs the choice
+// (near lights in a small dome are seen along different directions by spheres far apart).
+inline constexpr double kSlideShare = 0.08;
+inline constexpr double kStrictAgreementDeg = 5.0;
+inline constexpr double kStrictAgreementOrthoDeg = 8.0;
+
 // The sphere candidates of the stack, scored, best first; `chosen_photo` gets the `count`
-// chosen circles in photo pixels.
+// chosen circles in photo pixels. `second_search`: see kSlideShare.
 std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSearchOptions& opt,
                                              double min_peak, int count, const SphereCamera& camera,
-                                             std::vector<Circle>* chosen_photo);
+                                             std::vector<Circle>* chosen_photo,
+                                             bool second_search = false);
 // How many of the candidate's images with light spots (SphereCandidate::light_spots_px)
 // `circle_photo` (photo pixels) reflects to below the sample plane, every spot of the image;
 // the spots are in pixels of `spots_scale` (the analysis scale while candidates are scored, 1

@@ -117,8 +117,10 @@ struct StackCalibrationOptions {
   // orthographic model itself makes off-centre spheres disagree): when they disagree about
   // more than kMostLightsDisagree of the usable lights under the model taken (distant, or
   // near from the evidence), they are most likely not the capture's spheres and
-  // SphereSearchError is thrown with the candidates. true: the lights are kept (flagged as
-  // outliers).
+  // the search is made again, refining circles closer to where they were proposed and
+  // choosing the spheres by how closely their lights agree (StackCalibration::search_note says
+  // so); where those disagree too, SphereSearchError is thrown with the first search's
+  // candidates. true: the first search's lights are kept (flagged as outliers).
   bool allow_disagreement = false;
 };
 // See StackCalibrationOptions::allow_disagreement.
@@ -154,6 +156,9 @@ struct StackCalibration {
   // The material the second spots were treated as (kMirror or kGlass), and why.
   SphereMaterial material = SphereMaterial::kMirror;
   std::string material_note;
+  // Empty, or how the spheres were told apart when those first chosen disagreed about most
+  // lights (a second search, made only then: see allow_disagreement).
+  std::string search_note;
   int analysis_scale = 1;
   int width = 0, height = 0;
   // The camera the highlights were turned into directions with (focal_px 0: orthographic),
