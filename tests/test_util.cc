@@ -45,6 +45,9 @@ ScratchDir::~ScratchDir() {
   if (std::getenv("PTMKIT_KEEP_TMP") == nullptr) {
     std::error_code ec;
     fs::remove_all(path_, ec);
+    // The process's folder too, once its last scratch folder is gone (remove leaves a folder
+    // that is not empty): ctest runs each test in a process of its own.
+    fs::remove(path_.parent_path(), ec);
   }
 }
 

@@ -675,7 +675,12 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     // centre, the halo's is taken (photo-chrome's worst light 0.78-1.45 to 0.50-0.67 degrees
     // on seeds 1 and 3). The symmetry is measured on the lift in linear light, without
     // clipped pixels (their lift is cut short by the clip, the more so over a bright
-    // background): photo-dome's worst light error 0.62-1.43 to 0.18-0.27 degrees.
+    // background): photo-dome's worst light error 0.62-1.43 to 0.18-0.27 degrees. Where the
+    // core touches a reflection clipped in the median (the light falling on a mirrored
+    // window), the pixels bright in the median are left out too: the light's glow lifts
+    // them to the clip unevenly (the window's blurred edges, JPEG's ringing there), and only
+    // the halo over the dark surroundings tells where the light is (lit chrome at 2560 x
+    // 1440, two lights on a window: 2.1-4.5 px off to 0.2-0.5 px).
     const cv::Mat lift = linear_lift(l, base, srgb);
     const double core_r = std::sqrt(std::max(1, out.pixels) / std::numbers::pi);
     const double radius = std::max(4.0, 2.0 * core_r + 2.0);
@@ -684,7 +689,8 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
         symmetric_centre(lift, start, radius, std::max(1.0, core_r), [&](int x, int y) {
           return x >= 0 && y >= 0 && x < l.cols && y < l.rows &&
                  inside(x + win.rect.x, y + win.rect.y) &&
-                 !(out.saturated && l.at<float>(y, x) >= 0.98 * top);
+                 !(out.saturated && l.at<float>(y, x) >= 0.98 * top) &&
+                 !(out.touches_static && base.at<float>(y, x) >= 0.5 * top);
         });
     const Eigen::Vector2d halo(c.x() + win.rect.x, c.y() + win.rect.y);
     if (out.pixels <= kSmallCorePixels || (halo - out.px).norm() > kEdgeVsHaloPx) out.px = halo;
@@ -781,8 +787,10 @@ class Disagreement : public SphereSearchError {
   using SphereSearchError::SphereSearchError;
 };
 
-StackCalibration run(const Source& src, const std::vector<fs::path>& names,
-                     const StackCalibrationOptions& options, bool second_search) {
+// The options checked and the stack's evidence gathered (one pass over the photographs), with
+// the reference photo if one is given: what both searches read.
+Evidence prepare(const Source& src, const std::vector<fs::path>& names,
+                 const StackCalibrationOptions& options) {
   const RigOptions& rig = options.rig;
   if (const auto err = rig.validate(); !err.empty()) throw Error("sphere: " + err);
   if (src.count() < 1) throw Error("sphere: no images");
@@ -796,12 +804,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     if (b.width <= 0 || b.height <= 0) throw Error("--roi: width and height must be positive");
   }
   if (so.analysis_max_side_px < 64) throw Error("sphere: the analysis size must be >= 64 pixels");
-  StackCalibration out;
-  out.camera = rig.detection.camera;
   Evidence ev = gather(src, so.analysis_max_side_px);
-  out.analysis_scale = ev.scale;
-  out.width = ev.w;
-  out.height = ev.h;
   if (so.reference) {
     const Image ref = read_image(*so.reference);
     if (ref.width() != ev.w || ref.height() != ev.h) {
@@ -809,6 +812,21 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     }
     ev.reference = luma_plane(ref);
   }
+  return ev;
+}
+
+// One search on the evidence: the spheres (found, or given), then their highlights in windows
+// of the photographs (a second pass over them). `second_search`: see run_searches.
+StackCalibration run(const Source& src, const std::vector<fs::path>& names,
+                     const StackCalibrationOptions& options, const Evidence& ev,
+                     bool second_search) {
+  const RigOptions& rig = options.rig;
+  const SphereSearchOptions& so = options.search;
+  StackCalibration out;
+  out.camera = rig.detection.camera;
+  out.analysis_scale = ev.scale;
+  out.width = ev.w;
+  out.height = ev.h;
   const SphereOptions& det = rig.detection;
   std::vector<Circle> circles = rig.spheres;
   const bool detected = circles.empty();
@@ -1367,21 +1385,22 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
 }
 
 // run(), and where the spheres it found disagree about most lights, run() again with the
-// second search (kSlideShare): a second pass over the photographs, made only then. Where the
-// second search refuses too (its spheres disagree, or too few are found), the first refusal
-// stands.
+// second search (kSlideShare) on the same evidence: only the highlights' windows are read
+// again. Where the second search refuses too (its spheres disagree, or too few are found), the
+// first refusal stands.
 StackCalibration run_searches(const Source& src, const std::vector<fs::path>& names,
                               const StackCalibrationOptions& options) {
+  const Evidence ev = prepare(src, names, options);
   std::string first_message;
   std::vector<SphereCandidate> first_candidates;
   try {
-    return run(src, names, options, false);
+    return run(src, names, options, ev, false);
   } catch (const Disagreement& first) {
     first_message = first.what();
     first_candidates = first.candidates();
   }
   try {
-    StackCalibration out = run(src, names, options, true);
+    StackCalibration out = run(src, names, options, ev, true);
     out.search_note =
         "the spheres first chosen disagreed about most lights; these are from a second search "
         "that also refines circles within " +
