@@ -452,6 +452,14 @@ void paint_clipped_disc(Image* img, const Eigen::Vector2d& centre, double radius
     }
   }
 }
+// photo-chrome in a lit room (chrome balls on bases wider than themselves, windows and lamps
+// mirrored in them).
+synth::PhotoOptions lit_chrome_options(std::uint64_t seed) {
+  synth::PhotoOptions o = synth::photo_preset_options("photo-chrome");
+  o.environment = synth::PhotoEnvironment::kLit;
+  o.seed = seed;
+  return o;
+}
 // Calibrated without hints but the sphere count and the focal length.
 StackCalibration calibrate_photo(const PhotoImages& p, int spheres) {
   StackCalibrationOptions o;
@@ -633,9 +641,7 @@ TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
 TEST(CalibSphereStack, SpheresWhoseFirstChoiceDisagreesAreFoundByTheSecondSearch) {
   PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p;
-  p.options = synth::photo_preset_options("photo-chrome");
-  p.options.environment = synth::PhotoEnvironment::kLit;
-  p.options.seed = 1;
+  p.options = lit_chrome_options(1);
   render_all(&p, "lit");
   const StackCalibration r = calibrate_photo(p, 2);
   EXPECT_NE(r.search_note.find("second search"), std::string::npos) << r.search_note;
@@ -981,9 +987,7 @@ TEST(CalibSphereStack, ACoreOverAnUnevenBackgroundIsCentredByItsHalo) {
 TEST(CalibSphereStack, ALightOnAMirroredWindowIsCentredByTheHaloOverTheDarkAroundIt) {
   PTMKIT_RELEASE_BUILD_ONLY();
   PhotoImages p;
-  p.options = synth::photo_preset_options("photo-chrome");
-  p.options.environment = synth::PhotoEnvironment::kLit;
-  p.options.seed = 1;
+  p.options = lit_chrome_options(1);
   synth::resize_photo(1280, 720, &p.options);
   // Every other light (11 of 22), lights 6 and 14 among them, as 3 and 7.
   const std::vector<Eigen::Vector3d> all = synth::resolve_lights(p.options);
