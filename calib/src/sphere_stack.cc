@@ -47,6 +47,9 @@ struct Located {
   // The clipped region reaches pixels clipped in the stack's median too: a static
   // reflection (a window, a lamp) clipped in every image, merged with the light's core.
   bool touches_static = false;
+  // The core was cut to a disc placed by the region's shape alone (cut_to_disc's `by_shape`)
+  // and its halo's symmetry did not settle near it: nothing located the light.
+  bool cut_unsupported = false;
   // On glass: the spot is many times the sphere's usual core (kGlareCoreRatio), the glow of
   // the refracted hot spot rather than the light's reflection.
   double glare_ratio = 0.0;
@@ -169,11 +172,12 @@ Symmetry fit_symmetry(const cv::Mat& lift, const std::vector<Eigen::Vector2d>& p
 // follows the slope by a pixel or more; but the slope's two unknowns also absorb any
 // asymmetry of the halo itself (the lit scene mirrored around it), so it is taken only where
 // it leaves at most kRampAsymmetryShare of the plain fit's residual. Returns the start when
-// the fit does not settle
-// within `max_shift`.
+// the fit does not settle within `max_shift` (`settled` false).
 Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& start_win,
                                  double radius, double max_shift,
-                                 const std::function<bool(int, int)>& inside_win) {
+                                 const std::function<bool(int, int)>& inside_win,
+                                 bool* settled = nullptr) {
+  if (settled != nullptr) *settled = false;
   std::vector<Eigen::Vector2d> pts;
   const int r = static_cast<int>(std::ceil(radius));
   const int cx = static_cast<int>(std::lround(start_win.x()));
@@ -188,6 +192,7 @@ Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& sta
   if (pts.size() < 12) return start_win;
   const Symmetry plain = fit_symmetry(lift, pts, start_win, max_shift, false, inside_win);
   if (!plain.ok) return start_win;
+  if (settled != nullptr) *settled = true;
   const Symmetry sloped = fit_symmetry(lift, pts, plain.centre, max_shift, true, inside_win);
   if (!sloped.ok || (sloped.centre - start_win).norm() > max_shift) return plain.centre;
   const bool ramp = sloped.sum_sq / sloped.used < kRampAsymmetryShare * plain.sum_sq / plain.used;
@@ -267,11 +272,14 @@ constexpr int kGlassRetries = 3;
 // opposite side). `light_edge` (window pixels) tells the boundary pixels that can be the
 // light's edge, `climb` how far a pixel climbs from the median toward the clip (0..1);
 // `merged` says the region is known to hold more than the light (else a
-// region not much larger than the disc is left as it is).
+// region not much larger than the disc is left as it is). `by_shape`: the disc cut has none of
+// the light's edge on its circle, so it was placed by the region's shape alone (the most
+// pixels inside), which in a window that holds the light is anywhere.
 std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
                                            const std::function<bool(int, int)>& light_edge,
                                            const std::function<double(int, int)>& climb,
-                                           bool merged) {
+                                           bool merged, bool* by_shape) {
+  *by_shape = false;
   const cv::Mat& m = *region;
   std::vector<Eigen::Vector2d> boundary, inner;
   for (int y = 0; y < m.rows; ++y) {
@@ -287,6 +295,7 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
   const double disc_area = std::numbers::pi * r * r;
   if (!merged && static_cast<double>(inner.size()) < kMergedCoreRatio * disc_area) return {};
   double best_score = -1.0;
+  int best_on = 0;
   Eigen::Vector2d best_c(0.0, 0.0);
   for (const Eigen::Vector2d& p : inner) {
     for (const double dy : {0.0, 0.5}) {
@@ -310,12 +319,14 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
         const double score = on + 0.01 * in;
         if (score > best_score) {
           best_score = score;
+          best_on = on;
           best_c = c;
         }
       }
     }
   }
   if (best_score < 0.0) return {};
+  *by_shape = best_on == 0;
   for (const Eigen::Vector2d& p : inner) {
     if ((p - best_c).norm() > r + 1.5) {
       region->at<std::uint8_t>(static_cast<int>(p.y()), static_cast<int>(p.x())) = 0;
@@ -440,6 +451,7 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
                const std::vector<Eigen::Vector2d>& skip_px = {}) {
   Located out;
   std::optional<Eigen::Vector2d> disc_centre;  // window pixels, see cut_to_disc
+  bool cut_by_shape = false;
   const cv::Mat& l = win.luma;
   double peak = 0.0;
   cv::Point at(-1, -1);
@@ -574,8 +586,8 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
         }
         return false;
       };
-      disc_centre =
-          cut_to_disc(&region, core_radius_hint, light_edge, edge_weight, out.touches_static);
+      disc_centre = cut_to_disc(&region, core_radius_hint, light_edge, edge_weight,
+                                out.touches_static, &cut_by_shape);
     }
     cv::Mat padded;
     cv::copyMakeBorder(region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
@@ -685,13 +697,16 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     const double core_r = std::sqrt(std::max(1, out.pixels) / std::numbers::pi);
     const double radius = std::max(4.0, 2.0 * core_r + 2.0);
     const Eigen::Vector2d start(out.px.x() - win.rect.x, out.px.y() - win.rect.y);
+    const auto measured = [&](int x, int y) {
+      return x >= 0 && y >= 0 && x < l.cols && y < l.rows &&
+             inside(x + win.rect.x, y + win.rect.y) &&
+             !(out.saturated && l.at<float>(y, x) >= 0.98 * top) &&
+             !(out.touches_static && base.at<float>(y, x) >= 0.5 * top);
+    };
+    bool settled = false;
     const Eigen::Vector2d c =
-        symmetric_centre(lift, start, radius, std::max(1.0, core_r), [&](int x, int y) {
-          return x >= 0 && y >= 0 && x < l.cols && y < l.rows &&
-                 inside(x + win.rect.x, y + win.rect.y) &&
-                 !(out.saturated && l.at<float>(y, x) >= 0.98 * top) &&
-                 !(out.touches_static && base.at<float>(y, x) >= 0.5 * top);
-        });
+        symmetric_centre(lift, start, radius, std::max(1.0, core_r), measured, &settled);
+    out.cut_unsupported = cut_by_shape && !settled;
     const Eigen::Vector2d halo(c.x() + win.rect.x, c.y() + win.rect.y);
     if (out.pixels <= kSmallCorePixels || (halo - out.px).norm() > kEdgeVsHaloPx) out.px = halo;
   }
@@ -1256,8 +1271,13 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
           (located[q].pixels < kMergedCoreRatio * median && !located[q].touches_static)) {
         continue;
       }
-      located[q] =
+      // On a mirror sphere, unless nothing located the light in the disc cut (a light wholly
+      // inside a window mirrored in the sphere, a disc placed by the window's shape): the
+      // whole region's halo, found first, stands. On glass the clipped region beside the
+      // reflection is the refracted hot spot's glow, whose halo is no light's: the cut stands.
+      Located cut =
           locate(windows[q], bases[q], inside_of(q), srgb, std::sqrt(median / std::numbers::pi));
+      if (!cut.cut_unsupported || out.material == SphereMaterial::kGlass) located[q] = cut;
     }
   }
   // The light from a located spot: unusable (flagged) when there is no highlight, the core is
