@@ -463,6 +463,12 @@ synth::PhotoOptions lit_chrome_options(std::uint64_t seed) {
   o.seed = seed;
   return o;
 }
+PhotoImages render_lit_chrome(std::uint64_t seed) {
+  PhotoImages p;
+  p.options = lit_chrome_options(seed);
+  render_all(&p, "lit");
+  return p;
+}
 // Calibrated without hints but the sphere count and the focal length.
 StackCalibration calibrate_photo(const PhotoImages& p, int spheres) {
   StackCalibrationOptions o;
@@ -643,9 +649,7 @@ TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
 // then, keeps the outlines and chooses them by how closely their lights agree.
 TEST(CalibSphereStack, SpheresWhoseFirstChoiceDisagreesAreFoundByTheSecondSearch) {
   PTMKIT_RELEASE_BUILD_ONLY();
-  PhotoImages p;
-  p.options = lit_chrome_options(1);
-  render_all(&p, "lit");
+  const PhotoImages p = render_lit_chrome(1);
   const StackCalibration r = calibrate_photo(p, 2);
   EXPECT_NE(r.search_note.find("second search"), std::string::npos) << r.search_note;
   ASSERT_EQ(r.rig.spheres.size(), 2u);
@@ -1021,9 +1025,7 @@ TEST(CalibSphereStack, ALightOnAMirroredWindowIsCentredByTheHaloOverTheDarkAroun
 // (from the JPEG files) the light was written 11.5 degrees off.
 TEST(CalibSphereStack, ALightInsideAMirroredWindowIsNotTakenAtTheWindowsCentre) {
   PTMKIT_RELEASE_BUILD_ONLY();
-  PhotoImages p;
-  p.options = lit_chrome_options(7);
-  render_all(&p, "lit");
+  const PhotoImages p = render_lit_chrome(7);
   const StackCalibration r = calibrate_photo(p, 2);
   ASSERT_EQ(r.rig.spheres.size(), 2u);
   constexpr std::size_t kInWindow = 3;
