@@ -69,11 +69,35 @@ Circle OutlinePlane::from(const Circle& q) const {
   return c;
 }
 
+bool edge_on_ray(const cv::Mat& f, const Eigen::Vector2d& c, const Eigen::Vector2d& dir, double t0,
+                 double t1, double step, double* t) {
+  std::vector<double> prof;
+  ray_profile(f, c, dir, t0, t1, step, &prof);
+  double best = 0.0;
+  std::size_t bi = 0;
+  for (std::size_t i = 1; i + 1 < prof.size(); ++i) {
+    const double g = std::abs(prof[i + 1] - prof[i - 1]) / (2.0 * step);
+    if (g > best) {
+      best = g;
+      bi = i;
+    }
+  }
+  if (best < 2.0) return false;
+  double off = 0.0;
+  if (bi >= 2 && bi + 2 < prof.size()) {
+    const double gm = std::abs(prof[bi] - prof[bi - 2]), gp = std::abs(prof[bi + 2] - prof[bi]);
+    const double g0 = 2.0 * step * best;
+    const double den = gm - 2.0 * g0 + gp;
+    if (std::abs(den) > 1e-12) off = std::clamp(0.5 * (gm - gp) / den, -0.5, 0.5);
+  }
+  *t = t0 + (static_cast<double>(bi) + off) * step;
+  return true;
+}
+
 // Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
-// (1 + band) r: the largest radial derivative of the smoothed composite, at least 2 grey levels a
-// pixel, to a sub-sample by a parabola. Rays leaving the frame give none; `inside` counts the
-// others. Profiles are sampled at r / 200, between 0.35 and 1 px: a parabola through samples
-// further apart than the blurred edge is wide misplaces it (a sphere of radius 720 px sampled every
+// (1 + band) r: edge_on_ray. Rays leaving the frame give none; `inside` counts the others.
+// Profiles are sampled at r / 200, between 0.35 and 1 px: a parabola through samples further
+// apart than the blurred edge is wide misplaces it (a sphere of radius 720 px sampled every
 // 3.6 px: 0.5-1.0 px off, every pixel: 0.13-0.24).
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
                                        int* inside, double band) {
@@ -81,33 +105,16 @@ std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& 
   std::vector<Eigen::Vector2d> out;
   *inside = 0;
   const double step = std::clamp(r / 200.0, 0.35, 1.0);
-  std::vector<double> prof;
   for (int k = 0; k < kRays; ++k) {
     const double a = 2.0 * std::numbers::pi * k / kRays;
     const Eigen::Vector2d dir(std::cos(a), std::sin(a));
     const Eigen::Vector2d near = c + 1.02 * r * dir;
     if (near.x() < 1 || near.y() < 1 || near.x() > f.cols - 2 || near.y() > f.rows - 2) continue;
     ++*inside;
-    const double t0 = (1.0 - band) * r;
-    ray_profile(f, c, dir, t0, (1.0 + band) * r, step, &prof);
-    double best = 0.0;
-    std::size_t bi = 0;
-    for (std::size_t i = 1; i + 1 < prof.size(); ++i) {
-      const double g = std::abs(prof[i + 1] - prof[i - 1]) / (2.0 * step);
-      if (g > best) {
-        best = g;
-        bi = i;
-      }
+    double t = 0.0;
+    if (edge_on_ray(f, c, dir, (1.0 - band) * r, (1.0 + band) * r, step, &t)) {
+      out.push_back(c + t * dir);
     }
-    if (best < 2.0) continue;
-    double off = 0.0;
-    if (bi >= 2 && bi + 2 < prof.size()) {
-      const double gm = std::abs(prof[bi] - prof[bi - 2]), gp = std::abs(prof[bi + 2] - prof[bi]);
-      const double g0 = 2.0 * step * best;
-      const double den = gm - 2.0 * g0 + gp;
-      if (std::abs(den) > 1e-12) off = std::clamp(0.5 * (gm - gp) / den, -0.5, 0.5);
-    }
-    out.push_back(c + (t0 + (static_cast<double>(bi) + off) * step) * dir);
   }
   return out;
 }

@@ -235,6 +235,11 @@ inline void ray_profile(const cv::Mat& f, const Eigen::Vector2d& c, const Eigen:
   }
 }
 
+// The strongest edge on the ray c + t dir, t0 <= t <= t1, of the smoothed composite `f`: the
+// largest radial derivative, at least 2 grey levels a pixel, to a sub-sample by a parabola;
+// profiles sampled every `step` pixels. False where there is none.
+bool edge_on_ray(const cv::Mat& f, const Eigen::Vector2d& c, const Eigen::Vector2d& dir, double t0,
+                 double t1, double step, double* t);
 // Per ray from the centre (360 rays), the strongest edge between (1 - band) r and
 // (1 + band) r of the smoothed composite `f`; `inside` counts the rays that stay in the frame.
 std::vector<Eigen::Vector2d> ray_edges(const cv::Mat& f, const Eigen::Vector2d& c, double r,
