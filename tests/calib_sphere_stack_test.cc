@@ -621,9 +621,8 @@ TEST(CalibSphereStack, PhotoChromeRenderRefusesTheDish) {
 // glossy 30% too small). That circle reflects the low lights to below the sample plane; the
 // outline keeps them all above. Chrome spheres on cups, and black glossy balls lying on the
 // cloth, each in a lit room under 8 lights (3 of them 15 degrees up). At this size balls
-// lying on the cloth come out 0.4-0.5% too large (0.7-0.8% before the rim's polish), so there
-// the radius is held to 1%, five times closer than the horizon lies; the chrome spheres to the
-// targets.
+// lying on the cloth come out 0.4-0.5% too large, so there the radius is held to 1%, five times
+// closer than the horizon lies; the chrome spheres to the targets.
 TEST(CalibSphereStack, SpheresInALitRoomAreNotTakenForTheirMirroredHorizon) {
   PTMKIT_RELEASE_BUILD_ONLY();
   struct Case {
