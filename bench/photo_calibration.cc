@@ -6,7 +6,7 @@
 // highlight of its light, and each combined light direction.
 //
 //   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
-//                     [--environment dark|lit] [PRESET[:SEED,...] ...]
+//                     [--environment dark|lit] [--per-light] [PRESET[:SEED,...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
 //       `ptmkit synth --width W --height H` does); default the presets' 640 x 360
@@ -16,6 +16,8 @@
 //       --spheres-material M: every sphere of M (black-glossy, chrome, glass), as `ptmkit synth`
 //       --environment E: the room the spheres mirror, dark (the presets') or lit, as `ptmkit
 //       synth --environment E`
+//       --per-light: also one line per light: its elevation, each sphere's highlight error (px)
+//       and the combined direction's error (degrees)
 //
 // Prints one line per preset and seed; the figures are in docs/CALIBRATION.md.
 #include <algorithm>
@@ -43,7 +45,7 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
          const std::string& light_layout, bool bases, const std::string& material,
-         const std::string& environment) {
+         const std::string& environment, bool per_light) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
   if (!bases) po.sphere_bases = false;
@@ -103,6 +105,30 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
   }
   std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used, truth.light_dirs.size(),
               used ? mean / used : 0.0, max, seconds);
+  for (std::size_t i = 0; per_light && i < truth.light_dirs.size(); ++i) {
+    const double elevation =
+        std::asin(std::clamp(truth.light_dirs[i].normalized().z(), -1.0, 1.0)) * 180.0 /
+        std::numbers::pi;
+    std::printf("  light %2zu elevation %5.1f:", i, elevation);
+    for (std::size_t k = 0; k < r.rig.spheres.size() && k < truth.spheres.size(); ++k) {
+      const auto& lights = r.rig.spheres[k].lights;
+      if (i >= lights.size() || !lights[i].found) {
+        std::printf(" sphere %zu none;", k);
+      } else if (i >= truth.spheres[k].highlight_px.size() || !truth.spheres[k].highlight_px[i]) {
+        std::printf(" sphere %zu (%.2f, %.2f) no truth;", k, lights[i].highlight_px.x(),
+                    lights[i].highlight_px.y());
+      } else {
+        const Eigen::Vector2d d = lights[i].highlight_px - *truth.spheres[k].highlight_px[i];
+        std::printf(" sphere %zu (%.2f, %.2f) off (%+.2f, %+.2f);", k, lights[i].highlight_px.x(),
+                    lights[i].highlight_px.y(), d.x(), d.y());
+      }
+    }
+    if (i < r.rig.lights.size() && r.rig.lights[i].found) {
+      std::printf(" light %.3f deg\n", angle_deg(r.rig.lights[i].direction, truth.light_dirs[i]));
+    } else {
+      std::printf(" light not found\n");
+    }
+  }
   std::fflush(stdout);
 }
 
@@ -110,7 +136,7 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
 
 constexpr const char* kUsage =
     "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
-    "[--spheres-material M] [--environment dark|lit] [PRESET[:SEED,...] ...]\n";
+    "[--spheres-material M] [--environment dark|lit] [--per-light] [PRESET[:SEED,...] ...]\n";
 
 int main(int argc, char** argv) {
   try {
@@ -128,12 +154,17 @@ int main(int argc, char** argv) {
     int width = 0, height = 0;
     std::string lights;
     bool bases = true;
+    bool per_light = false;
     std::string material, environment;
-    while (!specs.empty() &&
-           (specs[0] == "--size" || specs[0] == "--lights" || specs[0] == "--no-bases" ||
-            specs[0] == "--spheres-material" || specs[0] == "--environment")) {
-      if (specs[0] == "--no-bases") {
-        bases = false;
+    while (!specs.empty() && (specs[0] == "--size" || specs[0] == "--lights" ||
+                              specs[0] == "--no-bases" || specs[0] == "--spheres-material" ||
+                              specs[0] == "--environment" || specs[0] == "--per-light")) {
+      if (specs[0] == "--no-bases" || specs[0] == "--per-light") {
+        if (specs[0] == "--no-bases") {
+          bases = false;
+        } else {
+          per_light = true;
+        }
         specs.erase(specs.begin());
         continue;
       }
@@ -176,7 +207,7 @@ int main(int argc, char** argv) {
       }
       for (const unsigned s : seeds) {
         try {
-          run(work, preset, s, width, height, lights, bases, material, environment);
+          run(work, preset, s, width, height, lights, bases, material, environment, per_light);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }
