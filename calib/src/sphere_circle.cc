@@ -70,6 +70,27 @@ Circle fit_circle(const std::vector<Eigen::Vector2d>& pts, std::vector<Eigen::Ve
   return c;
 }
 
+Eigen::Vector2d fit_circle_centre(const std::vector<Eigen::Vector2d>& pts, double radius_px,
+                                  const Eigen::Vector2d& start) {
+  Eigen::Vector2d c = start;
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
+    for (const Eigen::Vector2d& p : pts) {
+      const Eigen::Vector2d d = p - c;
+      const double len = std::max(d.norm(), 1e-9);
+      const Eigen::Vector2d j = -d / len;
+      jtj += j * j.transpose();
+      jtr += j * (len - radius_px);
+    }
+    const Eigen::Vector2d step = jtj.ldlt().solve(-jtr);
+    if (!step.allFinite()) break;
+    c += step;
+    if (step.norm() < 1e-8) break;
+  }
+  return c;
+}
+
 }  // namespace detail
 namespace {
 

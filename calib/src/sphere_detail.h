@@ -40,6 +40,11 @@ inline bool bilinear_at(const cv::Mat& m, double x, double y, double* v) {
 [[nodiscard]] Circle fit_circle(const std::vector<Eigen::Vector2d>& pts,
                                 std::vector<Eigen::Vector2d>* inliers = nullptr);
 
+// The centre of the circle of the given radius nearest the points (least squares on
+// |p - c| - radius), by Gauss-Newton from `start`: for an arc too short to fix its own radius.
+[[nodiscard]] Eigen::Vector2d fit_circle_centre(const std::vector<Eigen::Vector2d>& pts,
+                                                double radius_px, const Eigen::Vector2d& start);
+
 // Sub-pixel edge along rays from a rough circle: the largest radial derivative of the
 // composite (CV_32F) within 15% of the radius, then a trimmed geometric circle fit; rays that
 // leave the image are skipped. Returns `rough` when fewer than 20 rays have an edge.

@@ -301,27 +301,30 @@ double arc_span_deg(const std::vector<Eigen::Vector2d>& points, const Eigen::Vec
   return (2.0 * std::numbers::pi - gap) * 180.0 / std::numbers::pi;
 }
 
-// The centre of the circle of radius `r` nearest (least squares on the distances) to the points,
-// by Gauss-Newton from `start`.
-Eigen::Vector2d centre_on_circle(const std::vector<Eigen::Vector2d>& points, double r,
-                                 const Eigen::Vector2d& start) {
-  Eigen::Vector2d c = start;
-  for (int it = 0; it < 20; ++it) {
-    Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
-    Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
-    for (const Eigen::Vector2d& p : points) {
-      const Eigen::Vector2d d = p - c;
-      const double len = std::max(d.norm(), 1e-9);
-      const Eigen::Vector2d j = -d / len;
-      jtj += j * j.transpose();
-      jtr += j * (len - r);
-    }
-    const Eigen::Vector2d step = jtj.ldlt().solve(-jtr);
-    if (!step.allFinite()) break;
-    c += step;
-    if (step.norm() < 1e-8) break;
-  }
-  return c;
+// A pixel of `mask` (CV_8U) set and 4-adjacent to one unset or to the mask's border.
+bool on_mask_edge(const cv::Mat& mask, int x, int y) {
+  return mask.at<std::uint8_t>(y, x) &&
+         (x == 0 || y == 0 || x + 1 == mask.cols || y + 1 == mask.rows ||
+          !mask.at<std::uint8_t>(y, x - 1) || !mask.at<std::uint8_t>(y, x + 1) ||
+          !mask.at<std::uint8_t>(y - 1, x) || !mask.at<std::uint8_t>(y + 1, x));
+}
+
+// A clipped region's boundary pixel `b` as a point of its edge: the last clipped pixel along its
+// ray from `centre`, so the edge lies beyond its centre by half a pixel plus how far the next
+// pixel out climbs toward the clip (`climb`, 0..1). Also that next pixel; none where it leaves
+// the window (cols x rows).
+struct EdgePoint {
+  Eigen::Vector2d px;
+  cv::Point next;
+};
+std::optional<EdgePoint> edge_point(const Eigen::Vector2d& b, const Eigen::Vector2d& centre,
+                                    int cols, int rows,
+                                    const std::function<double(int, int)>& climb) {
+  const Eigen::Vector2d n = (b - centre).normalized();
+  const int ox = static_cast<int>(std::lround(b.x() + n.x()));
+  const int oy = static_cast<int>(std::lround(b.y() + n.y()));
+  if (ox < 0 || oy < 0 || ox >= cols || oy >= rows) return {};
+  return EdgePoint{b + (0.5 + climb(ox, oy)) * n, {ox, oy}};
 }
 
 // A clipped region much larger than the sphere's usual core: the light's image merged with
@@ -348,10 +351,7 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
     for (int x = 0; x < m.cols; ++x) {
       if (!m.at<std::uint8_t>(y, x)) continue;
       inner.emplace_back(x, y);
-      const bool edge = x == 0 || y == 0 || x + 1 == m.cols || y + 1 == m.rows ||
-                        !m.at<std::uint8_t>(y, x - 1) || !m.at<std::uint8_t>(y, x + 1) ||
-                        !m.at<std::uint8_t>(y - 1, x) || !m.at<std::uint8_t>(y + 1, x);
-      if (edge && light_edge(x, y)) boundary.emplace_back(x, y);
+      if (on_mask_edge(m, x, y) && light_edge(x, y)) boundary.emplace_back(x, y);
     }
   }
   const double disc_area = std::numbers::pi * r * r;
@@ -401,16 +401,11 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
     if (std::abs((b - best_c).norm() - r) < 1.0) arc.push_back(b);
   }
   if (arc.size() < 8) return {};
-  // Each arc pixel is the last clipped one along its ray; the edge lies beyond its centre by
-  // half a pixel plus how far the next pixel out climbs toward the clip (`climb`, 0..1): the
-  // short arc of a light mostly hidden by a reflection is otherwise fitted on pixel centres
-  // (photo-chrome seed 2's worst highlights 0.42 to 0.29-0.32 px).
+  // The arc on the edge (edge_point), not on its pixels' centres: the short arc of a light
+  // mostly hidden by a reflection is otherwise fitted on pixel centres (photo-chrome seed 2's
+  // worst highlights 0.42 to 0.29-0.32 px).
   for (Eigen::Vector2d& b : arc) {
-    const Eigen::Vector2d n = (b - best_c).normalized();
-    const int ox = static_cast<int>(std::lround(b.x() + n.x()));
-    const int oy = static_cast<int>(std::lround(b.y() + n.y()));
-    if (ox < 0 || oy < 0 || ox >= m.cols || oy >= m.rows) continue;
-    b += (0.5 + climb(ox, oy)) * n;
+    if (const auto e = edge_point(b, best_c, m.cols, m.rows, climb)) b = e->px;
   }
   Circle fitted;
   try {
@@ -420,7 +415,7 @@ std::optional<Eigen::Vector2d> cut_to_disc(cv::Mat* region, double r,
   }
   if ((fitted.centre_px - best_c).norm() > 1.5) return {};
   if (edge_r > 0.0 && arc_span_deg(arc, fitted.centre_px) < kFreeArcMinDeg) {
-    const Eigen::Vector2d c = centre_on_circle(arc, edge_r, fitted.centre_px);
+    const Eigen::Vector2d c = detail::fit_circle_centre(arc, edge_r, fitted.centre_px);
     if ((c - best_c).norm() <= 1.5) return c;
   }
   return fitted.centre_px;
@@ -694,23 +689,14 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     const Eigen::Vector2d c0 = mo.m00 > 0.0 ? Eigen::Vector2d(mo.m10 / mo.m00, mo.m01 / mo.m00)
                                             : Eigen::Vector2d(deep.x - 1, deep.y - 1);
     if (core_radius_hint <= 0.0 && !out.touches_static) {
-      // The whole core's edge: its boundary pixels placed as cut_to_disc places an arc's.
+      // The whole core's edge, placed as cut_to_disc places an arc's (edge_point), where the
+      // next pixel out has left the clipped region.
       std::vector<Eigen::Vector2d> edge;
       for (int y = 0; y < l.rows; ++y) {
         for (int x = 0; x < l.cols; ++x) {
-          if (!core.at<std::uint8_t>(y, x)) continue;
-          const bool rim = x == 0 || y == 0 || x + 1 == l.cols || y + 1 == l.rows ||
-                           !core.at<std::uint8_t>(y, x - 1) || !core.at<std::uint8_t>(y, x + 1) ||
-                           !core.at<std::uint8_t>(y - 1, x) || !core.at<std::uint8_t>(y + 1, x);
-          if (!rim) continue;
-          const Eigen::Vector2d b(x, y);
-          const Eigen::Vector2d n = (b - c0).normalized();
-          const int ox = static_cast<int>(std::lround(b.x() + n.x()));
-          const int oy = static_cast<int>(std::lround(b.y() + n.y()));
-          if (ox < 0 || oy < 0 || ox >= l.cols || oy >= l.rows || region.at<std::uint8_t>(oy, ox)) {
-            continue;
-          }
-          edge.push_back(b + (0.5 + edge_weight(ox, oy)) * n);
+          if (!on_mask_edge(core, x, y)) continue;
+          const auto e = edge_point({x, y}, c0, l.cols, l.rows, edge_weight);
+          if (e && !region.at<std::uint8_t>(e->next)) edge.push_back(e->px);
         }
       }
       if (edge.size() >= 8) {
