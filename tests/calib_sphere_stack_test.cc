@@ -79,6 +79,10 @@ constexpr double kShortArcHighlightPx = 0.35;
 // light's own lift: measured 0.047 and 0.057 px from the mirror highlights on average; 0.118
 // and 0.111 px where the clip's edge is taken, which the lit scene behind moves.
 constexpr double kLitChromeHighlightMeanPx = 0.09;
+// The large sphere under 12 lights near the camera's axis, some of them partly hidden:
+// measured (in memory) 0.56 degrees on average; 0.84 with every short arc held to the
+// whole cores' radius.
+constexpr double kHiddenArcsMeanDeg = 0.7;
 // A candidate scoring below the default --min-score (0.5) is never taken (docs/CALIBRATION.md).
 constexpr double kMinScore = 0.5;
 // uw-psm's circle found without a hint against the mask's: measured 0.97 px apart (its lower
@@ -1006,6 +1010,30 @@ TEST(CalibSphereStack, ACoreCutToAShortArcKeepsTheRadiusOfTheWholeCores) {
   const StackCalibration r = calibrate_photo(p, 2);
   expect_photo_rig(r, p, "photo-chrome seed 4", kLightMeanTargetDeg, kLightMaxTargetDeg);
   expect_highlight_near_truth(r, p, 3, "core cut to a short arc", kShortArcHighlightPx);
+}
+
+// The large sphere under lights near the camera's axis: the camera's reflection and the
+// pedestal hide part of some lights' images, and the arcs left of them fit circles 21-29%
+// larger than the sphere's whole cores. Such an arc keeps its own circle: held to the whole
+// cores' radius those highlights went 3-4 px off.
+TEST(CalibSphereStack, AShortArcThatDisagreesWithTheWholeCoresKeepsItsOwnCircle) {
+  PTMKIT_RELEASE_BUILD_ONLY();
+  const PhotoImages p = render_photo("photo-large-sphere", "rings:15:3,40:3,65:2,80:4", 1);
+  const StackCalibration r = calibrate_photo(p, 1);
+  ASSERT_EQ(r.rig.spheres.size(), 1u);
+  double sum = 0.0, worst = 0.0;
+  int n = 0;
+  for (std::size_t i = 0; i < r.rig.lights.size(); ++i) {
+    if (!r.rig.lights[i].found) continue;
+    const double e = angle_deg(r.rig.lights[i].direction, p.truth.light_dirs[i]);
+    sum += e;
+    worst = std::max(worst, e);
+    ++n;
+  }
+  ASSERT_GT(n, 0);
+  std::printf("large sphere under high lights: %d lights, mean %.3f, worst %.3f degrees\n", n,
+              sum / n, worst);
+  EXPECT_LE(sum / n, kHiddenArcsMeanDeg);
 }
 
 // A photographic preset at 10 lights (elevation 15 degrees at azimuths 0, 90, 180, 270; 40 at
