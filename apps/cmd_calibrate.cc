@@ -187,7 +187,24 @@ void run_sphere(const SphereArgs& args) {
   const int dropped = args.drop_outliers ? calib::drop_outliers(&report) : 0;
   const LightSet lights = calib::rig_light_set(report);
   if (lights.empty()) {
-    throw Error("no image has a usable highlight on the sphere (see the flags with --report)");
+    // The report says why each light was dropped: it is kept although the command fails.
+    std::string why = "no image has a usable highlight on the sphere";
+    if (!args.report.empty()) {
+      const OutputTransaction::Immediate keep;
+      write_file_atomic(args.report, result.to_json() + "\n");
+      why += " (the flags of every light are in " + args.report + ")";
+    } else {
+      why += " (--report FILE lists the flags of every light)";
+    }
+    for (const calib::SphereReport& sphere : report.spheres) {
+      for (const calib::SphereLight& light : sphere.lights) {
+        if (!light.flag.empty()) {
+          why += "\nfirst flag: " + light.image.filename().string() + ": " + light.flag;
+          break;
+        }
+      }
+    }
+    throw Error(why);
   }
   write_lp(args.output, lights);
   if (!args.json.empty()) write_light_json(args.json, lights);

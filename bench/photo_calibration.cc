@@ -6,7 +6,8 @@
 // highlight of its light, and each combined light direction.
 //
 //   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
-//                     [--environment dark|lit] [--per-light] [PRESET[:SEED,...] ...]
+//                     [--environment dark|lit] [--noise SIGMA] [--exposure X] [--per-light]
+//                     [PRESET[:SEED,...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
 //       `ptmkit synth --width W --height H` does); default the presets' 640 x 360
@@ -16,6 +17,10 @@
 //       --spheres-material M: every sphere of M (black-glossy, chrome, glass), as `ptmkit synth`
 //       --environment E: the room the spheres mirror, dark (the presets') or lit, as `ptmkit
 //       synth --environment E`
+//       --noise SIGMA: the sensor's read noise, grey levels of 8 bits (the presets': 1), as
+//       `ptmkit synth --noise SIGMA`
+//       --exposure X: the exposure (the presets': 1; 3 clips every highlight into a wide disc of
+//       bloom), as `ptmkit synth --exposure X`
 //       --per-light: also one line per light: its elevation, each sphere's highlight error (px)
 //       and the combined direction's error (degrees)
 //
@@ -24,6 +29,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <numbers>
 #include <string>
@@ -45,7 +51,7 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
          const std::string& light_layout, bool bases, const std::string& material,
-         const std::string& environment, bool per_light) {
+         const std::string& environment, double noise, double exposure, bool per_light) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
   if (!bases) po.sphere_bases = false;
@@ -54,6 +60,8 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
   }
   if (!light_layout.empty()) po.lights = light_layout;
   if (!environment.empty()) po.environment = synth::parse_environment(environment);
+  if (noise >= 0.0) po.artefacts.read_noise_grey = noise;
+  if (exposure > 0.0) po.exposure = exposure;
   if (width > 0) synth::resize_photo(width, height, &po);
   const fs::path dir = work / (preset + "-" + std::to_string(seed));
   fs::remove_all(dir);
@@ -136,7 +144,8 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
 
 constexpr const char* kUsage =
     "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
-    "[--spheres-material M] [--environment dark|lit] [--per-light] [PRESET[:SEED,...] ...]\n";
+    "[--spheres-material M] [--environment dark|lit] [--noise SIGMA] [--exposure X] "
+    "[--per-light] [PRESET[:SEED,...] ...]\n";
 
 int main(int argc, char** argv) {
   try {
@@ -156,9 +165,11 @@ int main(int argc, char** argv) {
     bool bases = true;
     bool per_light = false;
     std::string material, environment;
-    while (!specs.empty() && (specs[0] == "--size" || specs[0] == "--lights" ||
-                              specs[0] == "--no-bases" || specs[0] == "--spheres-material" ||
-                              specs[0] == "--environment" || specs[0] == "--per-light")) {
+    double noise = -1.0, exposure = 0.0;
+    while (!specs.empty() &&
+           (specs[0] == "--size" || specs[0] == "--lights" || specs[0] == "--no-bases" ||
+            specs[0] == "--spheres-material" || specs[0] == "--environment" ||
+            specs[0] == "--noise" || specs[0] == "--exposure" || specs[0] == "--per-light")) {
       if (specs[0] == "--no-bases" || specs[0] == "--per-light") {
         if (specs[0] == "--no-bases") {
           bases = false;
@@ -178,6 +189,16 @@ int main(int argc, char** argv) {
         material = specs[1];
       } else if (specs[0] == "--environment") {
         environment = specs[1];
+      } else if (specs[0] == "--noise" || specs[0] == "--exposure") {
+        char* end = nullptr;
+        const double v = std::strtod(specs[1].c_str(), &end);
+        if (end == specs[1].c_str() || *end != '\0' || !std::isfinite(v) || v < 0.0 ||
+            (specs[0] == "--exposure" && v <= 0.0)) {
+          std::fprintf(stderr, "photo_calibration: %s needs a number%s\n", specs[0].c_str(),
+                       specs[0] == "--exposure" ? " above 0" : " of at least 0");
+          return 2;
+        }
+        (specs[0] == "--noise" ? noise : exposure) = v;
       } else if (std::sscanf(specs[1].c_str(), "%dx%d", &width, &height) != 2 || width < 32 ||
                  height < 32) {
         std::fprintf(stderr, "photo_calibration: --size needs WxH, e.g. 2560x1440\n");
@@ -207,7 +228,8 @@ int main(int argc, char** argv) {
       }
       for (const unsigned s : seeds) {
         try {
-          run(work, preset, s, width, height, lights, bases, material, environment, per_light);
+          run(work, preset, s, width, height, lights, bases, material, environment, noise, exposure,
+              per_light);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }

@@ -275,6 +275,15 @@ constexpr double kMergedCoreRatio = 1.25;
 // glow 150-200).
 constexpr double kGlareCoreRatio = 8.0;
 constexpr int kGlareCoreMinPixels = 40;
+// A saturated core is compact, whatever DetectOptions::max_blob_area_fraction says, up to
+// kUsualCoreSlack times the sphere's usual clipped core (its median over the images), and
+// never beyond kMaxUsualCoreFraction of the sphere's area. An overexposed mirror sphere shows
+// every light as a large clipped disc of bloom (a chrome ball at three times the presets'
+// exposure: 300-340 pixels, 6% of its area), one size in every image: refusing them all
+// as "not compact" left no light, while a reflection of the scene clipped beside one light
+// is as large only in that image.
+constexpr double kUsualCoreSlack = 1.5;
+constexpr double kMaxUsualCoreFraction = 0.15;
 // On glass, how many more clipped components of a spot's window are tried when the one taken
 // reflects to below the sample plane.
 constexpr int kGlassRetries = 3;
@@ -1507,6 +1516,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   // A sphere's clipped cores are the light's image, of one size in every image (a mirror's
   // disc): a core far larger than the sphere's median has merged with something clipped
   // beside it and is cut back to a disc of the median's radius (cut_to_disc).
+  std::vector<double> usual_core(k_spheres, 0.0);  // per sphere: the median clipped core
   for (std::size_t k = 0; k < k_spheres; ++k) {
     std::vector<int> sizes;
     for (std::size_t q = 0; q < wants.size(); ++q) {
@@ -1519,6 +1529,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     std::nth_element(sizes.begin(), sizes.begin() + static_cast<std::ptrdiff_t>(sizes.size() / 2),
                      sizes.end());
     const double median = sizes[sizes.size() / 2];
+    usual_core[k] = median;
     if (out.material == SphereMaterial::kGlass) {
       for (std::size_t q = 0; q < wants.size(); ++q) {
         Located& loc = located[q];
@@ -1577,7 +1588,13 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       return;
     }
     light.highlight_px = loc.px;
-    if (loc.pixels > sphere_area_factor * c.radius_px * c.radius_px) {
+    const double disc_area = std::numbers::pi * c.radius_px * c.radius_px;
+    const double compact_pixels = std::max(
+        sphere_area_factor * c.radius_px * c.radius_px,
+        loc.saturated ? std::min(kUsualCoreSlack * usual_core[static_cast<std::size_t>(wt.sphere)],
+                                 kMaxUsualCoreFraction * disc_area)
+                      : 0.0);
+    if (loc.pixels > compact_pixels) {
       light.flag = "highlight core covers " + std::to_string(loc.pixels) +
                    " pixels: not a compact highlight (a reflection of the scene?)";
       return;

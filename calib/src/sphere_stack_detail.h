@@ -144,7 +144,8 @@ struct Spot {
 };
 
 // The spots of image i in a disc (analysis pixels) brighter than the median by more than
-// max(0.05, half the brightest lift in the disc), and at least min_peak bright.
+// max(0.05, half the brightest lift in the disc, six times the disc's noise in the image),
+// and at least min_peak bright.
 std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
                                double min_peak);
 
