@@ -998,36 +998,24 @@ TEST(CalibSphereStack, ANoisyDarkRoomDoesNotMakeACircleOfNoiseASphere) {
   EXPECT_LE(run.max_deg, kLightMaxTargetDeg);
 }
 
-// Chrome spheres at three times the presets' exposure (8 lights), their circles given: every
-// light's clipped core is a disc of bloom of 300-390 pixels (6-7% of the sphere), one size in
-// every image. Refused as "not compact" (more than 2% of the sphere), no light was usable.
-// A saturated core up to 1.5 times the sphere's usual one is compact: every light is written
-// (measured: mean 0.57, worst 0.95 degrees; the clipped discs' centres lie 0.2-0.45 px outward
-// of the mirror highlights).
+// Chrome spheres at three times the presets' exposure (8 lights): every light's clipped core
+// is a disc of bloom of 300-390 pixels (6-7% of the sphere) and 10-12% of it above half its
+// lift, one size in every image. Those spots were refused as not compact when finding the
+// spheres (over 10% of the disc), and the cores when locating the lights (over 2% of the
+// sphere): other circles were taken (34 px off, lights 53 degrees off on average), and with
+// the circles given no light was usable. Clipped spots of the sphere's one bloom size, and
+// clipped cores up to 1.5 times its usual one, are compact: both spheres are found and every
+// light is written (measured: mean 0.57, worst 0.90 degrees; the clipped discs' centres lie
+// 0.2-0.45 px outward of the mirror highlights).
 TEST(CalibSphereStack, AnOverexposedChromeSphereKeepsItsBloomedCores) {
   PTMKIT_RELEASE_BUILD_ONLY();
-  synth::PhotoOptions po = synth::photo_preset_options("photo-chrome");
-  po.exposure = 3.0;
-  po.lights = kEightLights;
   PhotoImages p;
-  p.options = po;
+  p.options = synth::photo_preset_options("photo-chrome");
+  p.options.exposure = 3.0;
+  p.options.lights = kEightLights;
   render_all(&p, "chrome");
-  StackCalibrationOptions o;
-  o.rig.detection.camera.focal_px = po.focal_px;
-  for (const auto& sphere : p.truth.spheres) {
-    o.rig.spheres.push_back(Circle{sphere.outline.centre_px, sphere.outline.radius_px, {}});
-  }
-  const StackCalibration r = calibrate_sphere_stack(p.images, p.names, o);
-  double mean = 0.0, worst = 0.0;
-  for (std::size_t i = 0; i < p.truth.light_dirs.size(); ++i) {
-    EXPECT_TRUE(r.rig.lights[i].found) << i << ": " << r.rig.lights[i].flag;
-    const double a = angle_deg(r.rig.lights[i].direction, p.truth.light_dirs[i]);
-    mean += a / static_cast<double>(p.truth.light_dirs.size());
-    worst = std::max(worst, a);
-  }
-  std::printf("chrome at exposure 3, circles given: mean %.2f max %.2f deg\n", mean, worst);
-  EXPECT_LE(mean, 0.75);
-  EXPECT_LE(worst, 1.25);
+  const StackCalibration r = calibrate_photo(p, 2);
+  expect_photo_rig(r, p, "chrome at exposure 3", 0.75, 1.25);
 }
 
 // One glass marble: no second sphere to agree with, and in some images its refracted hot

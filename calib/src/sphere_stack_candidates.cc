@@ -259,6 +259,45 @@ constexpr double kGrownMaxShift = 0.1;
 // the horizon mirrored in a chrome ball reflects 3 of 8 below, 8 of 22.
 constexpr double kBelowPlaneCost = 2.0;
 
+// A moving spot is compact, a light's reflection rather than a broad change of the scene,
+// within this share of the disc (a chrome ball's highlight blooms)...
+constexpr double kCompactSpotShare = 0.1;
+// ... or where it is a clipped spot of the sphere's one bloom size: an overexposed mirror
+// shows every light as a clipped disc of bloom of one size (a chrome ball at three times the
+// presets' exposure: 550-650 pixels above half their lift, 10-12% of the disc, in all 22
+// images). The brightest spots of at least kBloomImages of the images are clipped and within
+// kBloomSpread of their median size, itself under kBloomMaxShare of the disc; then a clipped
+// spot within that spread is compact. A glass marble's refracted glow, clipped too, varies
+// with the light (150-1600 pixels under lights 20-84 degrees up) and does not qualify.
+constexpr double kBloomImages = 0.75;
+constexpr double kBloomSpread = 1.25;
+constexpr double kBloomMaxShare = 0.15;
+
+struct BloomSize {
+  double median = 0.0;  // analysis pixels; 0: no bloom size
+  bool holds(const Spot& s) const {
+    return median > 0.0 && s.peak >= kSpotClip && s.area <= kBloomSpread * median &&
+           s.area * kBloomSpread >= median;
+  }
+};
+
+BloomSize bloom_size(const std::vector<std::vector<Spot>>& spots_of, double disc) {
+  std::vector<double> sizes;
+  for (const std::vector<Spot>& spots : spots_of) {
+    if (!spots.empty() && spots.front().peak >= kSpotClip) sizes.push_back(spots.front().area);
+  }
+  const double n = static_cast<double>(spots_of.size());
+  if (sizes.empty() || static_cast<double>(sizes.size()) < kBloomImages * n) return {};
+  std::sort(sizes.begin(), sizes.end());
+  const double median = sizes[sizes.size() / 2];
+  if (median > kBloomMaxShare * disc) return {};
+  const auto within = std::count_if(sizes.begin(), sizes.end(), [&](double a) {
+    return a <= kBloomSpread * median && a * kBloomSpread >= median;
+  });
+  if (static_cast<double>(within) < kBloomImages * n) return {};
+  return {median};
+}
+
 // `rim_band`: the rim is the share of rays whose strongest edge within this share of the
 // radius lies on the circle (the band the circle was refined in: a grown outline keeps its
 // own support beside the sharper circle inside it that it grew from).
@@ -290,11 +329,18 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   std::vector<std::vector<Spot>> spots_of(static_cast<std::size_t>(ev.n));
   out.spots_px.assign(static_cast<std::size_t>(ev.n), std::nullopt);
   for (int i = 0; i < ev.n; ++i) {
-    std::vector<Spot>& spots = spots_of[static_cast<std::size_t>(i)];
-    spots = moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
+    spots_of[static_cast<std::size_t>(i)] =
+        moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
+  }
+  const BloomSize bloom = bloom_size(spots_of, disc);
+  const auto compact = [&](const Spot& s) {
+    return s.area <= std::max(kCompactSpotShare * disc, 4.0) || bloom.holds(s);
+  };
+  for (int i = 0; i < ev.n; ++i) {
+    const std::vector<Spot>& spots = spots_of[static_cast<std::size_t>(i)];
     if (spots.empty()) continue;
     const Spot& s = spots.front();
-    if (s.area > std::max(0.1 * disc, 4.0)) continue;
+    if (!compact(s)) continue;
     places.push_back(s.centre_small);
     lifts.push_back(s.lift_linear);
     out.spots_px[static_cast<std::size_t>(i)] = s.centre_small;
@@ -309,8 +355,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
     const double light_lift = highlight_lift(lifts);
     for (std::size_t i = 0; i < spots_of.size(); ++i) {
       for (const Spot& sp : spots_of[i]) {
-        if (sp.lift_linear >= kLightLiftShare * light_lift &&
-            sp.area <= std::max(0.1 * disc, 4.0)) {
+        if (sp.lift_linear >= kLightLiftShare * light_lift && compact(sp)) {
           out.light_spots_px[i].push_back(sp.centre_small);
         }
       }

@@ -143,6 +143,9 @@ struct Spot {
   cv::Rect box;                  // analysis pixels
 };
 
+// A sample at or above this (full scale 1) is clipped.
+constexpr double kSpotClip = 0.99;
+
 // The spots of image i in a disc (analysis pixels) brighter than the median by more than
 // max(0.05, half the brightest lift in the disc, six times the disc's noise in the image),
 // and at least min_peak bright.
