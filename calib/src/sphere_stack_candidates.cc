@@ -268,7 +268,7 @@ constexpr double kCompactSpotShare = 0.1;
 // images). The brightest spots of at least kBloomImages of the images are clipped and within
 // kBloomSpread of their median size, itself under kBloomMaxShare of the disc; then a clipped
 // spot within that spread is compact. A glass marble's refracted glow, clipped too, varies
-// with the light (150-1600 pixels under lights 20-84 degrees up) and does not qualify.
+// with the light (90-1700 pixels under lights 20-84 degrees up) and does not qualify.
 constexpr double kBloomImages = 0.75;
 constexpr double kBloomSpread = 1.25;
 constexpr double kBloomMaxShare = 0.15;
