@@ -51,6 +51,8 @@ struct SynthFlags {
   int flare_spokes = 6;
   double flare_strength = 0.0;
   double vignetting = 0.0;
+  double exposure_jitter_ev = 0.0;
+  double shake_px = 0.0;
   double focal_px = 0.0;
   double light_radius_deg = 0.0;
   int supersample = 4;
@@ -74,6 +76,8 @@ struct PhotoFlagOptions {
   CLI::Option* no_vignetting = nullptr;
   CLI::Option* vignetting = nullptr;
   CLI::Option* no_noise = nullptr;
+  CLI::Option* exposure_jitter = nullptr;
+  CLI::Option* shake = nullptr;
   CLI::Option* jpeg_quality = nullptr;
   CLI::Option* focal_px = nullptr;
   CLI::Option* light_radius = nullptr;
@@ -84,7 +88,8 @@ struct PhotoFlagOptions {
             environment,      windows,       lamps,        no_scene_reflections,
             distractor,       no_flare,      flare_spokes, flare_strength,
             no_bloom,         no_vignetting, vignetting,   no_noise,
-            focal_px,         light_radius,  supersample,  no_exif};
+            focal_px,         light_radius,  supersample,  no_exif,
+            exposure_jitter,  shake};
   }
 };
 
@@ -190,6 +195,13 @@ void add_synth_command(CLI::App& root) {
                                  "Photo presets: brightness lost in the corners, 0..1 (default "
                                  "0.35)");
   p.no_noise = cmd->add_flag("--no-noise")->description("Photo presets: no sensor noise");
+  p.exposure_jitter = cmd->add_option("--exposure-jitter", flags->exposure_jitter_ev,
+                                      "Photo presets: exposure that varies from image to image "
+                                      "(automatic exposure, a flash's output), up to this many "
+                                      "EV either way, 0..4 (default 0)");
+  p.shake = cmd->add_option("--shake", flags->shake_px,
+                            "Photo presets: a camera that moves between shots: each image "
+                            "shifted by up to this many pixels, 0..20 (default 0)");
   p.focal_px = cmd->add_option("--focal-px", flags->focal_px,
                                "Photo presets: focal length in pixels (after --size/--width)");
   p.light_radius = cmd->add_option("--light-radius", flags->light_radius_deg,
@@ -260,6 +272,8 @@ void add_synth_command(CLI::App& root) {
       if (p.no_vignetting->count() > 0) o.artefacts.vignetting = false;
       if (p.vignetting->count() > 0) o.artefacts.vignetting_corner_loss = f.vignetting;
       if (p.no_noise->count() > 0) o.artefacts.noise = false;
+      if (p.exposure_jitter->count() > 0) o.artefacts.exposure_jitter_ev = f.exposure_jitter_ev;
+      if (p.shake->count() > 0) o.artefacts.shake_px = f.shake_px;
       if (p.light_radius->count() > 0) o.light_radius_deg = f.light_radius_deg;
       if (p.supersample->count() > 0) o.supersample = f.supersample;
       if (p.no_exif->count() > 0) o.exif_sensor_width_mm = 0.0;

@@ -6,7 +6,8 @@
 // highlight of its light, and each combined light direction.
 //
 //   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
-//                     [--environment dark|lit] [--noise SIGMA] [--exposure X] [--per-light]
+//                     [--environment dark|lit] [--noise SIGMA] [--exposure X]
+//                     [--exposure-jitter EV] [--shake PX] [--per-light]
 //                     [PRESET[:SEED,...] ...]
 //       default: photo-dome:1,2,3 photo-glass:1,2,3 photo-chrome:1,2,3 photo-large-sphere:1,2,3
 //       --size: the renders at W x H (the scene kept, the focal length scaled with the width, as
@@ -21,6 +22,11 @@
 //       `ptmkit synth --noise SIGMA`
 //       --exposure X: the exposure (the presets': 1; 3 clips every highlight into a wide disc of
 //       bloom), as `ptmkit synth --exposure X`
+//       --exposure-jitter EV: each image's exposure 2^u times the stack's, u uniform in
+//       [-EV, EV] per image, as `ptmkit synth --exposure-jitter EV` (a camera on automatic
+//       exposure, a flash whose output varies)
+//       --shake PX: each image shifted by up to PX pixels, as `ptmkit synth --shake PX` (a
+//       camera that moves between shots)
 //       --per-light: also one line per light: its elevation, each sphere's highlight error (px)
 //       and the combined direction's error (degrees)
 //
@@ -51,7 +57,8 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
          const std::string& light_layout, bool bases, const std::string& material,
-         const std::string& environment, double noise, double exposure, bool per_light) {
+         const std::string& environment, double noise, double exposure, double jitter_ev,
+         double shake_px, bool per_light) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
   if (!bases) po.sphere_bases = false;
@@ -62,6 +69,8 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
   if (!environment.empty()) po.environment = synth::parse_environment(environment);
   if (noise >= 0.0) po.artefacts.read_noise_grey = noise;
   if (exposure > 0.0) po.exposure = exposure;
+  if (jitter_ev > 0.0) po.artefacts.exposure_jitter_ev = jitter_ev;
+  if (shake_px > 0.0) po.artefacts.shake_px = shake_px;
   if (width > 0) synth::resize_photo(width, height, &po);
   const fs::path dir = work / (preset + "-" + std::to_string(seed));
   fs::remove_all(dir);
@@ -145,7 +154,7 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
 constexpr const char* kUsage =
     "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
     "[--spheres-material M] [--environment dark|lit] [--noise SIGMA] [--exposure X] "
-    "[--per-light] [PRESET[:SEED,...] ...]\n";
+    "[--exposure-jitter EV] [--shake PX] [--per-light] [PRESET[:SEED,...] ...]\n";
 
 int main(int argc, char** argv) {
   try {
@@ -165,11 +174,12 @@ int main(int argc, char** argv) {
     bool bases = true;
     bool per_light = false;
     std::string material, environment;
-    double noise = -1.0, exposure = 0.0;
+    double noise = -1.0, exposure = 0.0, jitter_ev = 0.0, shake_px = 0.0;
     while (!specs.empty() &&
            (specs[0] == "--size" || specs[0] == "--lights" || specs[0] == "--no-bases" ||
             specs[0] == "--spheres-material" || specs[0] == "--environment" ||
-            specs[0] == "--noise" || specs[0] == "--exposure" || specs[0] == "--per-light")) {
+            specs[0] == "--noise" || specs[0] == "--exposure" || specs[0] == "--exposure-jitter" ||
+            specs[0] == "--shake" || specs[0] == "--per-light")) {
       if (specs[0] == "--no-bases" || specs[0] == "--per-light") {
         if (specs[0] == "--no-bases") {
           bases = false;
@@ -189,7 +199,8 @@ int main(int argc, char** argv) {
         material = specs[1];
       } else if (specs[0] == "--environment") {
         environment = specs[1];
-      } else if (specs[0] == "--noise" || specs[0] == "--exposure") {
+      } else if (specs[0] == "--noise" || specs[0] == "--exposure" ||
+                 specs[0] == "--exposure-jitter" || specs[0] == "--shake") {
         char* end = nullptr;
         const double v = std::strtod(specs[1].c_str(), &end);
         if (end == specs[1].c_str() || *end != '\0' || !std::isfinite(v) || v < 0.0 ||
@@ -198,7 +209,10 @@ int main(int argc, char** argv) {
                        specs[0] == "--exposure" ? " above 0" : " of at least 0");
           return 2;
         }
-        (specs[0] == "--noise" ? noise : exposure) = v;
+        (specs[0] == "--noise"      ? noise
+         : specs[0] == "--exposure" ? exposure
+         : specs[0] == "--shake"    ? shake_px
+                                    : jitter_ev) = v;
       } else if (std::sscanf(specs[1].c_str(), "%dx%d", &width, &height) != 2 || width < 32 ||
                  height < 32) {
         std::fprintf(stderr, "photo_calibration: --size needs WxH, e.g. 2560x1440\n");
@@ -229,7 +243,7 @@ int main(int argc, char** argv) {
       for (const unsigned s : seeds) {
         try {
           run(work, preset, s, width, height, lights, bases, material, environment, noise, exposure,
-              per_light);
+              jitter_ev, shake_px, per_light);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }

@@ -308,6 +308,8 @@ TEST(SynthPhoto, EveryArtefactSwitchChangesTheImage) {
          for (auto& s : o->spheres) s.material = ptmkit::synth::SphereMaterial::kGlass;
        }},
       {"linear", [](PhotoOptions* o) { o->srgb = false; }},
+      {"exposure jitter", [](PhotoOptions* o) { o->artefacts.exposure_jitter_ev = 1.0; }},
+      {"shake", [](PhotoOptions* o) { o->artefacts.shake_px = 2.0; }},
   };
   for (const Case& c : cases) {
     PhotoOptions o = base;
@@ -319,6 +321,64 @@ TEST(SynthPhoto, EveryArtefactSwitchChangesTheImage) {
     }
     EXPECT_GT(changed, 20) << c.name;
   }
+}
+
+// Exposure jitter scales each image's radiance by one factor (different from image to
+// image, 2^u with |u| <= the jitter); shake moves each image's content by a vector no longer
+// than shake_px, different from image to image.
+TEST(SynthPhoto, ExposureJitterScalesEachImageAndShakeShiftsIt) {
+  PhotoOptions o = small("photo-dome", "rings:40:4");
+  o.artefacts.flare = false;
+  o.artefacts.bloom = false;
+  o.artefacts.vignetting = false;
+  PhotoOptions jit = o;
+  jit.artefacts.exposure_jitter_ev = 1.0;
+  const PhotoRenderer plain(o), jittered(jit);
+  std::vector<double> factors;
+  for (int i = 0; i < 4; ++i) {
+    const Image a = plain.render_radiance(i), b = jittered.render_radiance(i);
+    std::vector<double> ratio;
+    for (std::size_t k = 0; k < static_cast<std::size_t>(a.width()) * a.height() * 3; ++k) {
+      const double va = a.data()[k], vb = b.data()[k];
+      if (va < 0.02 || va > 0.4 || vb > 0.9) continue;  // lit, far from the clip
+      ratio.push_back(vb / va);
+    }
+    ASSERT_GT(ratio.size(), 1000u) << "image " << i;
+    std::vector<double> sorted = ratio;
+    std::nth_element(sorted.begin(),
+                     sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+    const double f = sorted[sorted.size() / 2];
+    // Pixels beside a saturated sample are sampled more finely where the jitter makes it
+    // saturate (or not): those few differ by more than the factor.
+    const auto same = std::count_if(ratio.begin(), ratio.end(),
+                                    [&](double r) { return std::abs(r - f) <= 1e-3 * f; });
+    EXPECT_GE(static_cast<double>(same), 0.98 * static_cast<double>(ratio.size()))
+        << "one factor over image " << i;
+    EXPECT_GE(f, 0.5 - 1e-6);
+    EXPECT_LE(f, 2.0 + 1e-6);
+    factors.push_back(f);
+  }
+  EXPECT_GT(*std::max_element(factors.begin(), factors.end()) -
+                *std::min_element(factors.begin(), factors.end()),
+            0.05)
+      << "the factor differs from image to image";
+
+  PhotoOptions shaken = o;
+  shaken.artefacts.shake_px = 1.5;
+  const PhotoRenderer moved(shaken);
+  std::vector<Eigen::Vector2d> shifts;
+  for (int i = 0; i < 4; ++i) {
+    const auto& hl = plain.truth().spheres[0].highlight_px[static_cast<std::size_t>(i)];
+    if (!hl) continue;
+    const Image a = plain.render_radiance(i), b = moved.render_radiance(i);
+    const Eigen::Vector2d d =
+        core_centroid(b, nullptr, *hl, 6, false) - core_centroid(a, nullptr, *hl, 6, false);
+    EXPECT_LE(d.norm(), 1.5 + 0.1) << "image " << i;
+    shifts.push_back(d);
+  }
+  ASSERT_GE(shifts.size(), 3u);
+  EXPECT_GT((shifts[0] - shifts[1]).norm() + (shifts[1] - shifts[2]).norm(), 0.1)
+      << "the shift differs from image to image";
 }
 
 TEST(SynthPhoto, DeterministicWhateverTheThreadCount) {
@@ -459,6 +519,12 @@ TEST(SynthPhoto, BadOptionsAreRefused) {
   EXPECT_THROW((void)ptmkit::synth::parse_sphere_material("wood"), ptmkit::Error);
   o = ptmkit::synth::photo_preset_options("photo-dome");
   EXPECT_THROW(ptmkit::synth::resize_photo(320, 320, &o), ptmkit::Error);
+  o = ptmkit::synth::photo_preset_options("photo-dome");
+  o.artefacts.exposure_jitter_ev = -0.5;
+  EXPECT_THROW(PhotoRenderer{o}, ptmkit::Error);
+  o = ptmkit::synth::photo_preset_options("photo-dome");
+  o.artefacts.shake_px = std::nan("");
+  EXPECT_THROW(PhotoRenderer{o}, ptmkit::Error);
 }
 
 }  // namespace

@@ -247,6 +247,11 @@ void validate(const PhotoOptions& o) {
   require(std::isfinite(a.read_noise_grey) && a.read_noise_grey >= 0.0 &&
               std::isfinite(a.shot_full_well) && a.shot_full_well > 0.0,
           "noise: read noise >= 0 grey levels and full well > 0");
+  require(std::isfinite(a.exposure_jitter_ev) && a.exposure_jitter_ev >= 0.0 &&
+              a.exposure_jitter_ev <= 4.0,
+          "exposure jitter must be in [0, 4] EV");
+  require(std::isfinite(a.shake_px) && a.shake_px >= 0.0 && a.shake_px <= 20.0,
+          "shake must be in [0, 20] pixels");
   require(std::isfinite(o.exposure) && o.exposure > 0.0, "exposure must be > 0");
   require(o.bits == 8 || o.bits == 16, "photo output is 8 or 16 bits");
   require(o.file_type != FileType::kExr, "photo output is png, tif or jpg");

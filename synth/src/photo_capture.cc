@@ -21,6 +21,14 @@ struct PhotoRenderer::Impl {
   detail::PhotoScene scene;
 };
 
+double exposure_factor(const PhotoOptions& options, int index) {
+  return detail::exposure_jitter(options, index);
+}
+
+Eigen::Vector2d shake_offset_px(const PhotoOptions& options, int index) {
+  return detail::shake_offset(options, index);
+}
+
 PhotoRenderer::PhotoRenderer(const PhotoOptions& options) : impl_(new Impl(options)) {}
 PhotoRenderer::~PhotoRenderer() { delete impl_; }
 
@@ -33,6 +41,7 @@ Image PhotoRenderer::render_radiance(int index) const {
     throw Error("synth photo: light index " + std::to_string(index) + " out of range");
   }
   Image img = s.trace(s.light_state(index));
+  detail::apply_shake(detail::shake_offset(s.o, index), &img);
   detail::apply_lens(s.o, &img);
   return img;
 }
@@ -119,9 +128,17 @@ PhotoReport render_photo_capture(const PhotoOptions& options, const fs::path& ou
     l.image = out_dir / image_name(i, n, o.file_type);
     l.direction = d;
     lights.lights.push_back(l);
-    images.push_back({{"file", image_name(i, n, o.file_type)},
-                      {"light_dir", xyz(d)},
-                      {"elevation_deg", elevation_deg(d)}});
+    nlohmann::json im = {{"file", image_name(i, n, o.file_type)},
+                         {"light_dir", xyz(d)},
+                         {"elevation_deg", elevation_deg(d)}};
+    // The image's own exposure and shift, where they vary (the circles and highlights of
+    // truth.json are the unshifted ones: add shake_px to place them in this image).
+    if (o.artefacts.exposure_jitter_ev > 0.0) im["exposure_factor"] = detail::exposure_jitter(o, i);
+    if (o.artefacts.shake_px > 0.0) {
+      const Eigen::Vector2d s = detail::shake_offset(o, i);
+      im["shake_px"] = {s.x(), s.y()};
+    }
+    images.push_back(std::move(im));
   }
   report.lp_file = out_dir / "lights.lp";
   write_lp(report.lp_file, lights);
@@ -207,7 +224,9 @@ PhotoReport render_photo_capture(const PhotoOptions& options, const fs::path& ou
        {{"on", a.bloom}, {"strength", a.bloom_strength}, {"sigma_frac", a.bloom_sigma_frac}}},
       {"vignetting", {{"on", a.vignetting}, {"corner_loss", a.vignetting_corner_loss}}},
       {"noise",
-       {{"on", a.noise}, {"read_grey", a.read_noise_grey}, {"shot_full_well", a.shot_full_well}}}};
+       {{"on", a.noise}, {"read_grey", a.read_noise_grey}, {"shot_full_well", a.shot_full_well}}},
+      {"exposure_jitter_ev", a.exposure_jitter_ev},
+      {"shake_px", a.shake_px}};
   j["sensor"] = {
       {"exposure", o.exposure},
       {"colour_space", o.srgb ? "srgb" : "linear"},

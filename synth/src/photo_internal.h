@@ -111,7 +111,14 @@ class PhotoScene {
                                           const LightState* light, int depth) const;
 };
 
-// photo_sensor.cc: vignetting, flare and bloom on linear radiance, in place.
+// photo_sensor.cc: image `index`'s exposure factor (PhotoArtefacts::exposure_jitter_ev; 1
+// without jitter) and its shake (PhotoArtefacts::shake_px; zero without), pure functions of
+// the seed and the index.
+[[nodiscard]] double exposure_jitter(const PhotoOptions& o, int index);
+[[nodiscard]] Eigen::Vector2d shake_offset(const PhotoOptions& o, int index);
+// The image shifted by `offset` pixels (bilinear; edges repeat), in place.
+void apply_shake(const Eigen::Vector2d& offset, Image* radiance);
+// Vignetting, flare and bloom on linear radiance, in place.
 void apply_lens(const PhotoOptions& o, Image* radiance);
 // Noise, clipping, encoding and quantisation: the file's values.
 [[nodiscard]] Image apply_sensor(const PhotoOptions& o, const Image& radiance, int image_index);

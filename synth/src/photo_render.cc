@@ -317,6 +317,7 @@ Sample PhotoScene::sample(double x, double y, const LightState* light) const {
   Sample s;
   const V3 d = pinhole_ray(x, y, o.focal_px, pp);
   s.rgb = radiance(V3::Zero(), d, light, kMaxDepth, -1, &s.id) * o.exposure;
+  if (light != nullptr) s.rgb *= exposure_jitter(o, light->index);
   s.hot = s.rgb.maxCoeff() > 1.0;
   return s;
 }

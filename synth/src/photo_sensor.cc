@@ -104,6 +104,44 @@ struct Grid {
 
 }  // namespace
 
+double exposure_jitter(const PhotoOptions& o, int index) {
+  const double ev = o.artefacts.exposure_jitter_ev;
+  if (ev <= 0.0) return 1.0;
+  const double u = 2.0 * unit(hash(o.seed, 0x6578706full, static_cast<std::uint64_t>(index))) - 1.0;
+  return std::exp2(u * ev);
+}
+
+Eigen::Vector2d shake_offset(const PhotoOptions& o, int index) {
+  const double r = o.artefacts.shake_px;
+  if (r <= 0.0) return Eigen::Vector2d::Zero();
+  // Uniform in the disc: radius as the square root of a uniform draw.
+  const auto i = static_cast<std::uint64_t>(index);
+  const double rho = r * std::sqrt(unit(hash(o.seed, 0x7368616bull, i, 0)));
+  const double phi = 2.0 * kPi * unit(hash(o.seed, 0x7368616bull, i, 1));
+  return {rho * std::cos(phi), rho * std::sin(phi)};
+}
+
+void apply_shake(const Eigen::Vector2d& offset, Image* img) {
+  if (offset.isZero()) return;
+  const int w = img->width(), h = img->height(), ch = img->channels();
+  const Image src = *img;
+  tbb::parallel_for(0, h, [&](int y) {
+    const double sy = std::clamp(y - offset.y(), 0.0, h - 1.0);
+    const int y0 = std::min(static_cast<int>(sy), h - 1), y1 = std::min(y0 + 1, h - 1);
+    const double fy = sy - y0;
+    for (int x = 0; x < w; ++x) {
+      const double sx = std::clamp(x - offset.x(), 0.0, w - 1.0);
+      const int x0 = std::min(static_cast<int>(sx), w - 1), x1 = std::min(x0 + 1, w - 1);
+      const double fx = sx - x0;
+      for (int c = 0; c < ch; ++c) {
+        const double a = src.at(x0, y0, c) + (src.at(x1, y0, c) - src.at(x0, y0, c)) * fx;
+        const double b = src.at(x0, y1, c) + (src.at(x1, y1, c) - src.at(x0, y1, c)) * fx;
+        img->at(x, y, c) = static_cast<float>(a + (b - a) * fy);
+      }
+    }
+  });
+}
+
 void apply_lens(const PhotoOptions& o, Image* img) {
   const int w = img->width(), h = img->height();
   const PhotoArtefacts& a = o.artefacts;

@@ -31,7 +31,8 @@
 // scene reflected in the spheres are lit by the room only, so their reflections are the same
 // in every image; the light's highlight, its direct shading and shadows move.
 //
-// Sensor and lens, in this order: radiance (1 = full scale at exposure 1) -> vignetting ->
+// Sensor and lens, in this order: radiance (1 = full scale at exposure 1; times the image's
+// exposure jitter) -> the image's shake (a sub-pixel shift) -> vignetting ->
 // flare (star-shaped streaks: each saturated pixel's excess above full scale spread along
 // flare_spokes spokes) -> bloom (a Gaussian halo of the excess) -> noise (shot + read) ->
 // clipping at full scale -> sRGB encoding (or linear) -> quantisation -> file (JPEG at
@@ -69,9 +70,12 @@
 //   object: whether the relief is on the ground
 //   environment: {kind ("dark" | "lit"), windows, lamps, reflect_scene}
 //   lights: {count, file, frame, light_radius_deg, light_irradiance}; images: per image
-//           {file, light_dir [x,y,z] (light frame), elevation_deg}
+//           {file, light_dir [x,y,z] (light frame), elevation_deg, exposure_factor (with
+//           exposure jitter), shake_px [dx, dy] (with shake: add it to the circles and
+//           highlights above to place them in this image)}
 //   artefacts: {flare {on, spokes, strength, length_frac, angle_deg}, bloom {on, sigma_frac,
-//               strength}, vignetting {on, corner_loss}, noise {on, read_grey, shot_full_well}}
+//               strength}, vignetting {on, corner_loss}, noise {on, read_grey, shot_full_well},
+//               exposure_jitter_ev, shake_px}
 //   sensor: {exposure, colour_space ("srgb" | "linear"), format, bits, jpeg_quality,
 //            exif {focal_mm, sensor_width_mm} (JPEG with an EXIF block) or null}
 #pragma once
@@ -131,6 +135,14 @@ struct PhotoArtefacts {
   double read_noise_grey = 1.0;  // read noise sigma, grey levels of 8 bits (linear)
   // Shot noise: electrons at full scale (variance = value / full_well, full scale 1).
   double shot_full_well = 4000.0;
+  // Exposure that differs from image to image (a camera left on automatic exposure, a flash
+  // whose output varies): each image's radiance times 2^(u x exposure_jitter_ev), u uniform in
+  // [-1, 1] per image. 0: every image alike (the default).
+  double exposure_jitter_ev = 0.0;
+  // A camera that moves between shots (a tripod knocked, mirror slap): each image's optical
+  // image shifted by a vector uniform in a disc of this radius, pixels, before the lens
+  // artefacts. truth.json keeps the unshifted circles and records each image's shift. 0: none.
+  double shake_px = 0.0;
 };
 
 struct PhotoOptions {
@@ -264,6 +276,13 @@ struct PhotoTruth {
   Eigen::Vector2d distractor_centre_px{0.0, 0.0};
   double distractor_radius_px = 0.0;
 };
+
+// Image `index`'s exposure as a multiple of options.exposure (2^u, u uniform in
+// [-exposure_jitter_ev, exposure_jitter_ev]; 1 without jitter) and its shake (the shift of its
+// optical image, pixels, within a disc of shake_px; zero without), as the renders apply and
+// truth.json records them: pure functions of the seed and the index.
+[[nodiscard]] double exposure_factor(const PhotoOptions& options, int index);
+[[nodiscard]] Eigen::Vector2d shake_offset_px(const PhotoOptions& options, int index);
 
 // A photo capture in memory: the scene built once, then any light rendered.
 class PhotoRenderer {
