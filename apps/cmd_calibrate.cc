@@ -1,7 +1,9 @@
 // ptmkit calibrate dome: light files from dome geometry.
 #include <cstdio>
+#include <limits>
 #include <memory>
 
+#include <algorithm>
 #include <array>
 
 #include "commands.h"
@@ -221,9 +223,13 @@ void run_sphere(const SphereArgs& args) {
     write_image(args.plot, calib::light_polar_plot(shown).view());
   }
   for (const calib::SphereReport& s : report.spheres) {
-    double score = 0.0;
+    // The chosen candidate nearest the sphere: the full-resolution polish moves a circle a
+    // little, a small one by more than a tenth of its radius.
+    double score = 0.0, nearest = std::numeric_limits<double>::infinity();
     for (const auto& c : result.candidates) {
-      if (c.chosen && (c.circle.centre_px - s.sphere.centre_px).norm() < 0.1 * s.sphere.radius_px) {
+      const double d = (c.circle.centre_px - s.sphere.centre_px).norm();
+      if (c.chosen && d < nearest) {
+        nearest = d;
         score = c.score;
       }
     }
@@ -234,6 +240,29 @@ void run_sphere(const SphereArgs& args) {
     std::printf(")\n");
   }
   if (!result.search_note.empty()) std::printf("  %s\n", result.search_note.c_str());
+  if (!result.exposure_gains.empty()) {
+    const auto [lo, hi] =
+        std::minmax_element(result.exposure_gains.begin(), result.exposure_gains.end());
+    std::printf(
+        "  the exposure varies from image to image: %.2f-%.2f times the stack's (measured from "
+        "what the spheres mirror; a camera on automatic exposure, or a flash whose output "
+        "varies); the highlights were measured against it (exposure_gains in the report)\n",
+        *lo, *hi);
+  }
+  if (!result.image_shifts_px.empty()) {
+    std::vector<double> len;
+    for (const Eigen::Vector2d& d : result.image_shifts_px) len.push_back(d.norm());
+    std::sort(len.begin(), len.end());
+    std::printf(
+        "  the camera moved between shots: images shifted by about %.2f px at most (median %.2f) "
+        "against the stack; spots were measured against the median's 3 x 3 maximum%s "
+        "(image_shifts_px in the report)\n",
+        len.back(), len[len.size() / 2],
+        result.image_shifts_undone
+            ? " and each highlight taken back by its image's shift"
+            : "; shifts this small are not told from what the lights change, and were not "
+              "undone");
+  }
   if (result.two_spot_images > 0) {
     std::printf("  %d of %zu images show two moving spots on a sphere; treated as %s (%s)\n",
                 result.two_spot_images, files.size(), calib::to_string(result.material),

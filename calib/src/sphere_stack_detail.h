@@ -106,6 +106,17 @@ struct Evidence {
   std::vector<std::vector<std::uint16_t>> small;  // per image, block-max luma * 65535
   cv::Mat full_max, full_mean;                    // CV_32F, photo size
   cv::Mat small_max, small_median, small_mean;    // CV_32F, analysis size
+  // Each image's shift against the stack's median (photo pixels; camera_shifts in
+  // sphere_stack_evidence.cc), and whether the camera moved between shots: the shifts' median
+  // length above kCameraMovedPx analysis pixels.
+  std::vector<Eigen::Vector2d> shifts_px;
+  bool camera_moved = false;
+  bool undo_shifts = false;  // the shifts' median length above kShiftUndoPx
+  // What a moving spot must rise above: the median, or where the camera moved its maximum
+  // over each pixel's 3 x 3 neighbourhood. A camera that moved by a fraction of a pixel moves
+  // every edge of the scene, and against the median itself each bright edge (a window
+  // mirrored in the sphere) lifts like a spot in every image.
+  cv::Mat small_median_max3;
   // At scale > 1: the per-pixel median over the images of each image's block mean (analysis
   // size; a block mean keeps an edge where it is, a block maximum moves it); else empty.
   cv::Mat small_block_median;
@@ -146,16 +157,46 @@ struct Spot {
 // A sample at or above this (full scale 1) is clipped.
 constexpr double kSpotClip = 0.99;
 
+// The camera moved between shots where the images' shifts against the median have a median
+// length above this, analysis pixels: steady renders of 22 lights give 0.002-0.035 (the
+// light's changes leave a little; with the exposure varying by +-1 EV 0.008-0.037), 8 lights
+// at three times the exposure 0.11 (their discs of bloom), shaken by up to a quarter of a
+// pixel 0.13-0.28 and by up to half a pixel 0.27-0.47.
+constexpr double kCameraMovedPx = 0.1;
+// The shifts are undone (each highlight taken back by its image's) only above this median
+// length: below it what the light changes can pass for them (the 8 overexposed lights above:
+// shifts of up to 1.1 px measured, 0.55 to 1.1 degrees mean if undone).
+constexpr double kShiftUndoPx = 0.2;
+
 // The spots of image i in a disc (analysis pixels) brighter than the median by more than
 // max(0.05, half the brightest lift in the disc, six times the disc's noise in the image),
-// and at least min_peak bright.
+// and at least min_peak bright. `gain`: image i's exposure against the stack's (see
+// exposure_gains); the median is scaled by it in linear light before it is subtracted.
 std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
-                               double min_peak);
+                               double min_peak, double gain = 1.0);
 
 // A sample in linear light: decoded where the samples are sRGB-encoded (clamped to 0..1).
 inline double to_linear(double v, bool srgb) {
   return srgb ? srgb_to_linear(std::clamp(v, 0.0, 1.0)) : v;
 }
+
+// The stack's median value m as an image taken at `gain` times the stack's exposure shows it:
+// scaled in linear light, clipped at full scale, encoded again.
+inline float scaled_median(float m, double gain, bool srgb) {
+  if (gain == 1.0) return m;
+  const double v = std::min(1.0, gain * to_linear(m, srgb));
+  return static_cast<float>(srgb ? linear_to_srgb(v) : v);
+}
+
+// Each image's exposure against the stack's, from what the spheres mirror of the room: the
+// median, over the pixels of the discs (analysis pixels: centres `c`, radii `r`) that the
+// stack's median shows bright but unclipped, of the image's value over the median's, in
+// linear light. The room's lamps and windows and whatever they light stay as they are from
+// light to light, so an image that shows them brighter or darker was exposed so (a camera
+// on automatic exposure, a flash whose output varies). 1 for an image without enough such
+// pixels (a dark room that mirrors nothing bright).
+std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::Vector2d>& c,
+                                   const std::vector<double>& r);
 
 // ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
 

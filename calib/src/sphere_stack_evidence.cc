@@ -1,15 +1,101 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <vector>
 
 #include <tbb/parallel_for.h>
+#include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
 
 #include "sphere_stack_detail.h"
 
 namespace ptmkit::calib::stack_detail {
+
+namespace {
+
+// The share of the median's pixels, its steepest edges, that the shifts are measured on.
+constexpr double kShiftEdgeShare = 0.02;
+constexpr int kShiftIterations = 10;
+
+// Each image's shift against the stack's median (analysis pixels), by Gauss-Newton on the
+// median's strongest edges (the kShiftEdgeShare of its pixels with the steepest gradient):
+// image(p) = a median(p - d) (a: the image's exposure against the stack's), each step
+// weighted by Tukey's biweight of the residual at twice
+// its robust scale, so what the light changes (a highlight, a shading edge) weighs little
+// against the edges that stay (the spheres' rims, the windows they mirror, the bases).
+std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
+  std::vector<Eigen::Vector2d> out(static_cast<std::size_t>(ev.n), Eigen::Vector2d::Zero());
+  const cv::Mat& m = ev.small_median;
+  if (m.cols < 8 || m.rows < 8 || ev.n < 3) return out;
+  cv::Mat gx, gy, mag;
+  cv::Sobel(m, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(m, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::magnitude(gx, gy, mag);
+  std::vector<float> sorted;
+  for (int y = 2; y < m.rows - 2; ++y) {
+    for (int x = 2; x < m.cols - 2; ++x) sorted.push_back(mag.at<float>(y, x));
+  }
+  const auto cut = sorted.begin() + static_cast<std::ptrdiff_t>((1.0 - kShiftEdgeShare) *
+                                                                static_cast<double>(sorted.size()));
+  std::nth_element(sorted.begin(), cut, sorted.end());
+  const float thr = std::max(*cut, 1e-4f);
+  std::vector<cv::Point> pts;
+  for (int y = 2; y < m.rows - 2; ++y) {
+    for (int x = 2; x < m.cols - 2; ++x) {
+      if (mag.at<float>(y, x) >= thr) pts.emplace_back(x, y);
+    }
+  }
+  if (pts.size() < 50) return out;
+  // Bilinear sample of a plane at (x, y), inside the frame by construction (|d| is capped).
+  auto sample = [](const cv::Mat& f, double x, double y) {
+    const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+    const double fx = x - x0, fy = y - y0;
+    const float* r0 = f.ptr<float>(y0);
+    const float* r1 = f.ptr<float>(y0 + 1);
+    return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+           fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  };
+  tbb::parallel_for(0, ev.n, [&](int i) {
+    // The image's exposure may differ from the stack's: image(p) = a median(p - d), a free.
+    Eigen::Vector2d d = Eigen::Vector2d::Zero();
+    double a = 1.0;
+    std::vector<double> res(pts.size()), absr(pts.size());
+    for (int it = 0; it < kShiftIterations; ++it) {
+      for (std::size_t j = 0; j < pts.size(); ++j) {
+        res[j] = ev.at(i, pts[j].x, pts[j].y) - a * sample(m, pts[j].x - d.x(), pts[j].y - d.y());
+        absr[j] = std::abs(res[j]);
+      }
+      const auto mid = absr.begin() + static_cast<std::ptrdiff_t>(absr.size() / 2);
+      std::nth_element(absr.begin(), mid, absr.end());
+      const double c = 2.0 * std::max(1e-3, 1.4826 * *mid);
+      Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d b = Eigen::Vector3d::Zero();
+      for (std::size_t j = 0; j < pts.size(); ++j) {
+        const double u = res[j] / c;
+        if (std::abs(u) >= 1.0) continue;
+        const double w = (1.0 - u * u) * (1.0 - u * u);
+        const double px = pts[j].x - d.x(), py = pts[j].y - d.y();
+        // d res / d (dx, dy, a).
+        const Eigen::Vector3d g(a * sample(gx, px, py), a * sample(gy, px, py), -sample(m, px, py));
+        h += w * g * g.transpose();
+        b += w * g * res[j];
+      }
+      if (std::abs(h.determinant()) < 1e-15) break;
+      const Eigen::Vector3d step = -h.ldlt().solve(b);
+      d += step.head<2>();
+      a = std::clamp(a + step.z(), 1.0 / 16.0, 16.0);
+      // A shift beyond a pixel and a half is no camera shake the analysis copy can follow.
+      if (d.norm() > 1.5) d *= 1.5 / d.norm();
+      if (step.head<2>().norm() < 1e-3 && std::abs(step.z()) < 1e-4) break;
+    }
+    out[static_cast<std::size_t>(i)] = d;
+  });
+  return out;
+}
+
+}  // namespace
 
 Evidence gather(const Source& src, int max_side) {
   Evidence ev;
@@ -82,6 +168,21 @@ Evidence gather(const Source& src, int max_side) {
       }
     }
   });
+  ev.shifts_px = camera_shifts(ev);
+  std::vector<double> moved;
+  for (const Eigen::Vector2d& d : ev.shifts_px) moved.push_back(d.norm());
+  if (!moved.empty()) {
+    std::nth_element(moved.begin(), moved.begin() + static_cast<std::ptrdiff_t>(moved.size() / 2),
+                     moved.end());
+    ev.camera_moved = moved[moved.size() / 2] > kCameraMovedPx;
+    ev.undo_shifts = moved[moved.size() / 2] > kShiftUndoPx;
+  }
+  if (ev.camera_moved) {
+    cv::dilate(ev.small_median, ev.small_median_max3, cv::Mat());
+  } else {
+    ev.small_median_max3 = ev.small_median;
+  }
+  for (Eigen::Vector2d& d : ev.shifts_px) d *= ev.scale;
   cv::resize(ev.full_mean, ev.small_mean, cv::Size(ev.sw, ev.sh), 0, 0, cv::INTER_AREA);
   if (!block_sum.empty()) {
     ev.small_block_median = cv::Mat(ev.sh, ev.sw, CV_32F);
@@ -160,7 +261,7 @@ constexpr double kSpotNoiseLifts = 6.0;
 // max(0.05, half the brightest lift in the disc, kSpotNoiseLifts times its noise), and at
 // least min_peak bright.
 std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
-                               double min_peak) {
+                               double min_peak, double gain) {
   const int x0 = std::max(0, static_cast<int>(std::floor(c.x() - r)));
   const int y0 = std::max(0, static_cast<int>(std::floor(c.y() - r)));
   const int x1 = std::min(ev.sw - 1, static_cast<int>(std::ceil(c.x() + r)));
@@ -180,13 +281,14 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
         continue;
       }
       const float v = ev.at(i, x, y);
-      const float d = v - ev.small_median.at<float>(y, x);
+      const float d = v - scaled_median(ev.small_median.at<float>(y, x), gain, ev.srgb);
       if (have_prev) steps.push_back(std::abs(d - prev));
       prev = d;
       have_prev = true;
       if (v < min_peak) continue;
-      lift.at<float>(y - y0, x - x0) = d;
-      best = std::max(best, d);
+      const float lifted = v - scaled_median(ev.small_median_max3.at<float>(y, x), gain, ev.srgb);
+      lift.at<float>(y - y0, x - x0) = lifted;
+      best = std::max(best, lifted);
     }
   }
   float noise = 0.0f;
@@ -214,7 +316,7 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
       sy[static_cast<std::size_t>(l - 1)] += wgt * (y + y0);
       s.lift = std::max(s.lift, d);
       const double v = ev.at(i, x + x0, y + y0);
-      const double m = ev.small_median.at<float>(y + y0, x + x0);
+      const double m = scaled_median(ev.small_median_max3.at<float>(y + y0, x + x0), gain, ev.srgb);
       s.lift_linear = std::max(s.lift_linear, to_linear(v, ev.srgb) - to_linear(m, ev.srgb));
       s.peak = std::max(s.peak, static_cast<double>(ev.at(i, x + x0, y + y0)));
     }
@@ -238,6 +340,109 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
                                                     : a.centre_small.x() < b.centre_small.x();
   });
   return spots;
+}
+
+// A median this bright (linear) and no brighter counts toward the gain: well above the dark
+// room and its noise, and unclipped in most images whatever their exposure.
+constexpr double kGainMinLinear = 0.1;
+constexpr double kGainMaxLinear = 0.8;
+// Fewest such pixels over the discs for a gain to be measured, and the most taken.
+constexpr int kGainMinPixels = 20;
+constexpr std::size_t kGainMaxPixels = 20000;
+// A pixel follows the first gains where its ratio lies within this share of an image's gain
+// in at least kGainSteadyShare of the images (the light's own reflection and its glow pass
+// over a few of them).
+constexpr double kGainFollow = 0.15;
+constexpr double kGainSteadyShare = 0.8;
+
+std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::Vector2d>& c,
+                                   const std::vector<double>& r) {
+  std::vector<double> gains(static_cast<std::size_t>(ev.n), 1.0);
+  // The pixels, once: median in the band, inside a disc.
+  std::vector<cv::Point> px;
+  std::vector<double> m_lin;
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    const int x0 = std::max(0, static_cast<int>(std::floor(c[k].x() - r[k])));
+    const int y0 = std::max(0, static_cast<int>(std::floor(c[k].y() - r[k])));
+    const int x1 = std::min(ev.sw - 1, static_cast<int>(std::ceil(c[k].x() + r[k])));
+    const int y1 = std::min(ev.sh - 1, static_cast<int>(std::ceil(c[k].y() + r[k])));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        if ((Eigen::Vector2d(x, y) - c[k]).squaredNorm() > r[k] * r[k]) continue;
+        const double m = to_linear(ev.small_median.at<float>(y, x), ev.srgb);
+        if (m < kGainMinLinear || m > kGainMaxLinear) continue;
+        px.emplace_back(x, y);
+        m_lin.push_back(m);
+      }
+    }
+  }
+  if (static_cast<int>(px.size()) < kGainMinPixels) return gains;
+  // A sphere filling a lit frame has hundreds of thousands: every k-th is as good a sample and
+  // keeps the ratios below (one per pixel and image) small.
+  if (px.size() > kGainMaxPixels) {
+    const std::size_t step = (px.size() + kGainMaxPixels - 1) / kGainMaxPixels;
+    std::size_t kept = 0;
+    for (std::size_t j = 0; j < px.size(); j += step, ++kept) {
+      px[kept] = px[j];
+      m_lin[kept] = m_lin[j];
+    }
+    px.resize(kept);
+    m_lin.resize(kept);
+  }
+  // Each pixel's ratio image / median per image; a clipped sample says only that the ratio is
+  // at least its own, and ranks above every unclipped one (which a median needs and no more).
+  const std::size_t np = px.size(), ni = static_cast<std::size_t>(ev.n);
+  std::vector<double> ratio(np * ni);
+  tbb::parallel_for(std::size_t{0}, ni, [&](std::size_t i) {
+    for (std::size_t j = 0; j < np; ++j) {
+      const double v = ev.at(static_cast<int>(i), px[j].x, px[j].y);
+      ratio[i * np + j] = v >= kSpotClip ? std::numeric_limits<double>::infinity()
+                                         : to_linear(v, ev.srgb) / m_lin[j];
+    }
+  });
+  auto median_of = [](std::vector<double> v) {
+    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  // First, over every such pixel; then over the pixels that follow those gains in most
+  // images: what the room shows. A glass ball's refracted glow is bright in the median too,
+  // but it comes and goes with the lights (under a light near the camera's axis it covers
+  // half the ball, clipped), and taken with the rest it made such an image's gain 16.
+  std::vector<double> first(ni, 1.0);
+  for (std::size_t i = 0; i < ni; ++i) {
+    first[i] = median_of({ratio.begin() + static_cast<std::ptrdiff_t>(i * np),
+                          ratio.begin() + static_cast<std::ptrdiff_t>((i + 1) * np)});
+  }
+  std::vector<std::size_t> steady;
+  for (std::size_t j = 0; j < np; ++j) {
+    std::size_t follow = 0;
+    for (std::size_t i = 0; i < ni; ++i) {
+      if (std::isfinite(first[i]) &&
+          std::abs(ratio[i * np + j] - first[i]) <= kGainFollow * first[i]) {
+        ++follow;
+      }
+    }
+    if (static_cast<double>(follow) >= kGainSteadyShare * static_cast<double>(ni)) {
+      steady.push_back(j);
+    }
+  }
+  if (static_cast<int>(steady.size()) < kGainMinPixels) return gains;
+  // The median of their ratios, where they agree: the lower quartile within half kGainFollow
+  // of it (the upper half may clip in a brighter image). Where the image's light lifts many
+  // of them (a glass ball glowing whole under a light by the camera's axis: the ratios
+  // spread, or more than half clip) the image gives no measure and keeps 1.
+  for (std::size_t i = 0; i < ni; ++i) {
+    std::vector<double> v;
+    v.reserve(steady.size());
+    for (std::size_t j : steady) v.push_back(ratio[i * np + j]);
+    std::sort(v.begin(), v.end());
+    const double q1 = v[v.size() / 4], mid = v[v.size() / 2];
+    if (std::isfinite(mid) && mid - q1 <= 0.5 * kGainFollow * mid) {
+      gains[i] = std::clamp(mid, 1.0 / 16.0, 16.0);
+    }
+  }
+  return gains;
 }
 
 }  // namespace ptmkit::calib::stack_detail

@@ -80,6 +80,10 @@ struct SphereLight {
   std::filesystem::path image;
   bool found = false;  // false: no usable highlight (see flag)
   std::string flag;    // why the light is unusable or doubtful; empty when fine
+  // Where the light's reflection lies (photo pixels). Where the camera moved between shots
+  // and the shifts were undone (StackCalibration::image_shifts_undone) it is placed in the
+  // stack's frame, where the circle was found: the position in the photograph less the
+  // image's shift.
   Eigen::Vector2d highlight_px{0.0, 0.0};
   double peak = 0.0;  // brightest value in the blob, full scale 1
   int blob_pixels = 0;

@@ -39,7 +39,10 @@
 //
 // The highlight of a light on a sphere: the moving spots in the circle (the image minus the
 // stack's median, so a reflected window or lamp, which is in every image, cancels), the
-// brightest taken, then located in the photograph at full resolution:
+// brightest taken, then located in the photograph at full resolution. Where the exposure
+// varies from image to image (a camera on automatic exposure, a flash whose output varies:
+// StackCalibration::exposure_gains), the median is first scaled in linear light by the
+// image's exposure, measured from what the spheres mirror of the room:
 //   unsaturated  centroid of the brightness above the median within the spot
 //   saturated    the clipped core (its holes filled) without its flare streaks and bloom: the
 //                pixels at least half the core's inscribed radius from the clipped region's
@@ -159,6 +162,27 @@ struct StackCalibration {
   // Empty, or how the spheres were told apart when those first chosen disagreed about most
   // lights (a second search, made only then: see allow_disagreement).
   std::string search_note;
+  // Per image, its exposure as a multiple of the stack's, where the exposure was found to
+  // vary (empty where it does not). Measured on the spheres' discs, from the pixels the
+  // stack's median shows bright (0.1-0.8 of full scale, linear) and that follow one gain per
+  // image in at least 80% of the images (the room's lamps and windows mirrored): the median
+  // of their ratios image / median, in linear light; 1 for an image whose light lifts them
+  // too unevenly to tell (their lower quartile more than 7.5% below their median, or more
+  // than half of them clipped). The exposure varies where the gains' median distance from 1
+  // exceeds 3% (steady renders: at most 2.3%).
+  std::vector<double> exposure_gains;
+  // Per image, its shift against the stack's median (photo pixels, x right, y down), where
+  // the camera was found to have moved between shots (empty where it did not): measured by
+  // Gauss-Newton on the median's steepest 2% of edges at the analysis size (with the image's
+  // exposure as a third unknown), weighted against what the light changes; the camera moved
+  // where the shifts' median length exceeds 0.1 analysis pixels. The moving spots are then
+  // measured against the median's maximum over each pixel's 3 x 3 neighbourhood (else every
+  // shifted bright edge is a spot). Where the median length exceeds 0.2 analysis pixels
+  // (image_shifts_undone), each highlight is also taken back into the stack's frame by its
+  // image's shift (SphereLight::highlight_px) before its direction is computed; below that,
+  // what the lights change can pass for shifts.
+  std::vector<Eigen::Vector2d> image_shifts_px;
+  bool image_shifts_undone = false;
   int analysis_scale = 1;
   int width = 0, height = 0;
   // The camera the highlights were turned into directions with (focal_px 0: orthographic),
