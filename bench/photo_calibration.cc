@@ -122,6 +122,26 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
   }
   std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used, truth.light_dirs.size(),
               used ? mean / used : 0.0, max, seconds);
+  // The camera's measured shifts against the render's, both taken about their own mean (the
+  // stack's median, which the shifts are measured against, sits near the images' mean place).
+  if (!r.image_shifts_px.empty() && r.image_shifts_px.size() == truth.light_dirs.size()) {
+    const std::size_t n = r.image_shifts_px.size();
+    Eigen::Vector2d mean_found = Eigen::Vector2d::Zero(), mean_true = Eigen::Vector2d::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+      mean_found += r.image_shifts_px[i] / static_cast<double>(n);
+      mean_true += synth::shake_offset_px(po, static_cast<int>(i)) / static_cast<double>(n);
+    }
+    double sq = 0.0, worst = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double e = ((r.image_shifts_px[i] - mean_found) -
+                        (synth::shake_offset_px(po, static_cast<int>(i)) - mean_true))
+                           .norm();
+      sq += e * e / static_cast<double>(n);
+      worst = std::max(worst, e);
+    }
+    std::printf("  camera moved: shifts %s, off the render's by %.3f px rms, %.3f at worst\n",
+                r.image_shifts_undone ? "undone" : "not undone", std::sqrt(sq), worst);
+  }
   for (std::size_t i = 0; per_light && i < truth.light_dirs.size(); ++i) {
     const double elevation =
         std::asin(std::clamp(truth.light_dirs[i].normalized().z(), -1.0, 1.0)) * 180.0 /

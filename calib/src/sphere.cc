@@ -18,6 +18,7 @@
 namespace ptmkit::calib {
 
 using detail::luma_at;
+using detail::upper_median;
 
 std::string SphereOptions::validate() const {
   if (!(blob_fraction > 0.0 && blob_fraction < 1.0)) return "blob_fraction must be in (0, 1)";
@@ -73,9 +74,7 @@ Eigen::Vector3d sphere_centre_in_camera(const Circle& sphere, const SphereCamera
     std::vector<double> a(static_cast<std::size_t>(res.size()));
     for (Eigen::Index i = 0; i < res.size(); ++i) a[static_cast<std::size_t>(i)] = std::abs(res(i));
     std::vector<double> sorted = a;
-    std::nth_element(sorted.begin(),
-                     sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
-    const double limit = 3.0 * 1.4826 * sorted[sorted.size() / 2] + 1e-12;
+    const double limit = 3.0 * 1.4826 * upper_median(sorted) + 1e-12;
     std::vector<Eigen::Index> keep;
     for (Eigen::Index i = 0; i < res.size(); ++i) {
       if (a[static_cast<std::size_t>(i)] <= limit) keep.push_back(i);
@@ -206,9 +205,7 @@ SphereReport calibrate_sphere(const std::vector<Image>& images,
           if (on_sphere(x, y)) level.push_back(luma_at(view, x, y));
         }
       }
-      std::nth_element(level.begin(), level.begin() + static_cast<std::ptrdiff_t>(level.size() / 2),
-                       level.end());
-      const double base = level[level.size() / 2];
+      const double base = upper_median(level);
       samples.clear();
       for (int y = std::max(0, by0 - 2); y <= std::min(h - 1, by1 + 2); ++y) {
         for (int x = std::max(0, bx0 - 2); x <= std::min(w - 1, bx1 + 2); ++x) {

@@ -55,9 +55,7 @@ Circle fit_circle(const std::vector<Eigen::Vector2d>& pts, std::vector<Eigen::Ve
     std::vector<double> res;
     for (const auto& p : use) res.push_back(std::abs((p - c.centre_px).norm() - c.radius_px));
     std::vector<double> sorted = res;
-    std::nth_element(sorted.begin(),
-                     sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
-    const double limit = std::max(3.0 * 1.4826 * sorted[sorted.size() / 2], 0.05);
+    const double limit = std::max(3.0 * 1.4826 * upper_median(sorted), 0.05);
     std::vector<Eigen::Vector2d> kept;
     for (std::size_t i = 0; i < use.size(); ++i) {
       if (res[i] <= limit) kept.push_back(use[i]);
@@ -199,9 +197,7 @@ Circle refine_circle(const Circle& rough, const cv::Mat& composite) {
   }
   if (edge.size() < 20) return rough;
   std::vector<double> sorted = strength;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                   sorted.end());
-  const double median = sorted[sorted.size() / 2];
+  const double median = upper_median(sorted);
   std::vector<Eigen::Vector2d> strong;
   for (std::size_t i = 0; i < edge.size(); ++i) {
     if (strength[i] >= 0.3 * median) strong.push_back(edge[i]);

@@ -2,6 +2,7 @@
 // circle fitting and refinement, a pixel's luma, drawings as images; not public.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <vector>
@@ -14,6 +15,20 @@
 #include "ptmkit/core/image.h"
 
 namespace ptmkit::calib::detail {
+
+// The k-th smallest of v (0-based, k < v.size()); v is reordered.
+template <class T>
+T kth_smallest(std::vector<T>& v, std::size_t k) {
+  const auto at = v.begin() + static_cast<std::ptrdiff_t>(k);
+  std::nth_element(v.begin(), at, v.end());
+  return *at;
+}
+
+// The upper median of a non-empty v (its element v.size() / 2 once sorted); v is reordered.
+template <class T>
+T upper_median(std::vector<T>& v) {
+  return kth_smallest(v, v.size() / 2);
+}
 
 // Luma of pixel (x, y) of a colour image; the first channel of a grey one.
 inline double luma_at(ConstImageViewF img, int x, int y) {

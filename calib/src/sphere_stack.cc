@@ -30,6 +30,7 @@ namespace {
 
 using namespace stack_detail;  // NOLINT: the passes of this one search
 using detail::bilinear_at;
+using detail::upper_median;
 
 // ---- Highlights at full resolution. --------------------------------------------------------
 
@@ -1287,9 +1288,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     // is taken as steady and the median left as it is.
     std::vector<double> off;
     for (double g : gains) off.push_back(std::abs(std::log(g)));
-    std::nth_element(off.begin(), off.begin() + static_cast<std::ptrdiff_t>(off.size() / 2),
-                     off.end());
-    if (off.empty() || off[off.size() / 2] <= kExposureVaries) {
+    if (off.empty() || upper_median(off) <= kExposureVaries) {
       std::fill(gains.begin(), gains.end(), 1.0);
     } else {
       out.exposure_gains = gains;
@@ -1561,9 +1560,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       }
     }
     if (sizes.size() < 3) continue;
-    std::nth_element(sizes.begin(), sizes.begin() + static_cast<std::ptrdiff_t>(sizes.size() / 2),
-                     sizes.end());
-    const double median = sizes[sizes.size() / 2];
+    const double median = upper_median(sizes);
     usual_core[k] = median;
     if (out.material == SphereMaterial::kGlass) {
       for (std::size_t q = 0; q < wants.size(); ++q) {
@@ -1585,9 +1582,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     }
     double edge_r = 0.0;  // see kFreeArcMinDeg
     if (radii.size() >= static_cast<std::size_t>(kEdgeRadiusMinCores)) {
-      std::nth_element(radii.begin(), radii.begin() + static_cast<std::ptrdiff_t>(radii.size() / 2),
-                       radii.end());
-      edge_r = radii[radii.size() / 2];
+      edge_r = upper_median(radii);
     }
     // Where the exposure varies, a more exposed image clips more of the light's lobe and
     // flare: its core is measured against the cores of the images exposed at least about as
@@ -1607,9 +1602,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
         }
       }
       if (alike.size() < 3) return std::numeric_limits<double>::infinity();
-      std::nth_element(alike.begin(), alike.begin() + static_cast<std::ptrdiff_t>(alike.size() / 2),
-                       alike.end());
-      return static_cast<double>(alike[alike.size() / 2]);
+      return static_cast<double>(upper_median(alike));
     };
     for (std::size_t q = 0; q < wants.size(); ++q) {
       if (static_cast<std::size_t>(wants[q].sphere) != k || !located[q].ok ||

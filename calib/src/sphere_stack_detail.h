@@ -22,6 +22,8 @@
 namespace ptmkit::calib::stack_detail {
 
 namespace fs = std::filesystem;
+using detail::kth_smallest;
+using detail::upper_median;
 
 // ---- Sources: the stack in bands of rows, from files or from memory. -----------------------
 
@@ -212,9 +214,7 @@ inline constexpr double kLightLiftShare = 0.25;
 // (the 3 (n - 1) / 4-th smallest) of the lifts of its brightest spots; 0 for none.
 inline double highlight_lift(std::vector<double> lifts) {
   if (lifts.empty()) return 0.0;
-  const auto q = static_cast<std::ptrdiff_t>(3 * (lifts.size() - 1) / 4);
-  std::nth_element(lifts.begin(), lifts.begin() + q, lifts.end());
-  return lifts[static_cast<std::size_t>(q)];
+  return kth_smallest(lifts, 3 * (lifts.size() - 1) / 4);
 }
 
 // A light reflects off a sphere lying on the sample plane only from above the plane, so a

@@ -37,10 +37,10 @@ std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
   for (int y = 2; y < m.rows - 2; ++y) {
     for (int x = 2; x < m.cols - 2; ++x) sorted.push_back(mag.at<float>(y, x));
   }
-  const auto cut = sorted.begin() + static_cast<std::ptrdiff_t>((1.0 - kShiftEdgeShare) *
-                                                                static_cast<double>(sorted.size()));
-  std::nth_element(sorted.begin(), cut, sorted.end());
-  const float thr = std::max(*cut, 1e-4f);
+  const float thr =
+      std::max(kth_smallest(sorted, static_cast<std::size_t>((1.0 - kShiftEdgeShare) *
+                                                             static_cast<double>(sorted.size()))),
+               1e-4f);
   std::vector<cv::Point> pts;
   for (int y = 2; y < m.rows - 2; ++y) {
     for (int x = 2; x < m.cols - 2; ++x) {
@@ -67,9 +67,7 @@ std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
         res[j] = ev.at(i, pts[j].x, pts[j].y) - a * sample(m, pts[j].x - d.x(), pts[j].y - d.y());
         absr[j] = std::abs(res[j]);
       }
-      const auto mid = absr.begin() + static_cast<std::ptrdiff_t>(absr.size() / 2);
-      std::nth_element(absr.begin(), mid, absr.end());
-      const double c = 2.0 * std::max(1e-3, 1.4826 * *mid);
+      const double c = 2.0 * std::max(1e-3, 1.4826 * upper_median(absr));
       Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
       Eigen::Vector3d b = Eigen::Vector3d::Zero();
       for (std::size_t j = 0; j < pts.size(); ++j) {
@@ -172,10 +170,9 @@ Evidence gather(const Source& src, int max_side) {
   std::vector<double> moved;
   for (const Eigen::Vector2d& d : ev.shifts_px) moved.push_back(d.norm());
   if (!moved.empty()) {
-    std::nth_element(moved.begin(), moved.begin() + static_cast<std::ptrdiff_t>(moved.size() / 2),
-                     moved.end());
-    ev.camera_moved = moved[moved.size() / 2] > kCameraMovedPx;
-    ev.undo_shifts = moved[moved.size() / 2] > kShiftUndoPx;
+    const double typical = upper_median(moved);
+    ev.camera_moved = typical > kCameraMovedPx;
+    ev.undo_shifts = typical > kShiftUndoPx;
   }
   if (ev.camera_moved) {
     cv::dilate(ev.small_median, ev.small_median_max3, cv::Mat());
@@ -293,9 +290,7 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
   }
   float noise = 0.0f;
   if (!steps.empty()) {
-    auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
-    std::nth_element(steps.begin(), mid, steps.end());
-    noise = 1.4826f * *mid / std::numbers::sqrt2_v<float>;
+    noise = 1.4826f * upper_median(steps) / std::numbers::sqrt2_v<float>;
   }
   const float thr = std::max({0.05f, 0.5f * best, static_cast<float>(kSpotNoiseLifts) * noise});
   if (best <= thr) return {};
@@ -400,11 +395,7 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
                                          : to_linear(v, ev.srgb) / m_lin[j];
     }
   });
-  auto median_of = [](std::vector<double> v) {
-    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    return *mid;
-  };
+  auto median_of = [](std::vector<double> v) { return upper_median(v); };
   // First, over every such pixel; then over the pixels that follow those gains in most
   // images: what the room shows. A glass ball's refracted glow is bright in the median too,
   // but it comes and goes with the lights (under a light near the camera's axis it covers
