@@ -110,10 +110,13 @@ struct Evidence {
   cv::Mat small_max, small_median, small_mean;    // CV_32F, analysis size
   // Each image's shift against the stack's median (photo pixels; camera_shifts in
   // sphere_stack_evidence.cc), and whether the camera moved between shots: the shifts' median
-  // length above kCameraMovedPx analysis pixels.
+  // length above kCameraMovedPx analysis pixels, and the shifts measured on the frame's left
+  // and right halves alone no further apart than that (their distance's median over the
+  // images, photo pixels: shift_halves_apart_px).
   std::vector<Eigen::Vector2d> shifts_px;
+  double shift_halves_apart_px = 0.0;
   bool camera_moved = false;
-  bool undo_shifts = false;  // the shifts' median length above kShiftUndoPx
+  bool undo_shifts = false;  // the camera moved, by a median length above kShiftUndoPx
   // What a moving spot must rise above: the median, or where the camera moved its maximum
   // over each pixel's 3 x 3 neighbourhood. A camera that moved by a fraction of a pixel moves
   // every edge of the scene, and against the median itself each bright edge (a window
@@ -162,8 +165,11 @@ constexpr double kSpotClip = 0.99;
 // The camera moved between shots where the images' shifts against the median have a median
 // length above this, analysis pixels: steady renders of 22 lights give 0.002-0.035 (the
 // light's changes leave a little; with the exposure varying by +-1 EV 0.008-0.037), 8 lights
-// at three times the exposure 0.11 (their discs of bloom), shaken by up to a quarter of a
-// pixel 0.13-0.28 and by up to half a pixel 0.27-0.47.
+// at three times the exposure 0.09-0.11 and 22 at five times 0.15 (their discs of bloom),
+// shaken by up to a quarter of a pixel 0.13-0.28 and by up to half a pixel 0.27-0.47. The
+// halves of the frame tell the last two apart: a camera's shift moves both alike (the shifts
+// measured on each half alone 0.4-0.65 times the shift apart), the bloom does not (2.2-6
+// times).
 constexpr double kCameraMovedPx = 0.1;
 // The shifts are undone (each highlight taken back by its image's) only above this median
 // length: below it what the light changes can pass for them (the 8 overexposed lights above:

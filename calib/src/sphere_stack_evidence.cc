@@ -19,16 +19,27 @@ namespace {
 constexpr double kShiftEdgeShare = 0.02;
 constexpr int kShiftIterations = 10;
 
+struct CameraShifts {
+  std::vector<Eigen::Vector2d> shifts;  // per image, analysis pixels
+  // Per image: how far apart the shifts measured on the frame's left and right halves alone
+  // are (analysis pixels; 0 where a half has too few edges).
+  std::vector<double> halves_apart;
+};
+
 // Each image's shift against the stack's median (analysis pixels), by Gauss-Newton on the
 // median's strongest edges (the kShiftEdgeShare of its pixels with the steepest gradient):
 // image(p) = a median(p - d) (a: the image's exposure against the stack's), each step
 // weighted by Tukey's biweight of the residual at twice
 // its robust scale, so what the light changes (a highlight, a shading edge) weighs little
-// against the edges that stay (the spheres' rims, the windows they mirror, the bases).
-std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
-  std::vector<Eigen::Vector2d> out(static_cast<std::size_t>(ev.n), Eigen::Vector2d::Zero());
+// against the edges that stay (the spheres' rims, the windows they mirror, the bases). The
+// same on each half of the frame gives CameraShifts::halves_apart.
+CameraShifts camera_shifts(const Evidence& ev) {
+  CameraShifts cs;
+  std::vector<Eigen::Vector2d>& out = cs.shifts;
+  out.assign(static_cast<std::size_t>(ev.n), Eigen::Vector2d::Zero());
+  cs.halves_apart.assign(static_cast<std::size_t>(ev.n), 0.0);
   const cv::Mat& m = ev.small_median;
-  if (m.cols < 8 || m.rows < 8 || ev.n < 3) return out;
+  if (m.cols < 8 || m.rows < 8 || ev.n < 3) return cs;
   cv::Mat gx, gy, mag;
   cv::Sobel(m, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
   cv::Sobel(m, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
@@ -47,7 +58,7 @@ std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
       if (mag.at<float>(y, x) >= thr) pts.emplace_back(x, y);
     }
   }
-  if (pts.size() < 50) return out;
+  if (pts.size() < 50) return cs;
   // Bilinear sample of a plane at (x, y), inside the frame by construction (|d| is capped).
   auto sample = [](const cv::Mat& f, double x, double y) {
     const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
@@ -57,24 +68,24 @@ std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
     return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
   };
-  tbb::parallel_for(0, ev.n, [&](int i) {
+  auto estimate = [&](int i, const std::vector<cv::Point>& use) {
     // The image's exposure may differ from the stack's: image(p) = a median(p - d), a free.
     Eigen::Vector2d d = Eigen::Vector2d::Zero();
     double a = 1.0;
-    std::vector<double> res(pts.size()), absr(pts.size());
+    std::vector<double> res(use.size()), absr(use.size());
     for (int it = 0; it < kShiftIterations; ++it) {
-      for (std::size_t j = 0; j < pts.size(); ++j) {
-        res[j] = ev.at(i, pts[j].x, pts[j].y) - a * sample(m, pts[j].x - d.x(), pts[j].y - d.y());
+      for (std::size_t j = 0; j < use.size(); ++j) {
+        res[j] = ev.at(i, use[j].x, use[j].y) - a * sample(m, use[j].x - d.x(), use[j].y - d.y());
         absr[j] = std::abs(res[j]);
       }
       const double c = 2.0 * std::max(1e-3, 1.4826 * upper_median(absr));
       Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
       Eigen::Vector3d b = Eigen::Vector3d::Zero();
-      for (std::size_t j = 0; j < pts.size(); ++j) {
+      for (std::size_t j = 0; j < use.size(); ++j) {
         const double u = res[j] / c;
         if (std::abs(u) >= 1.0) continue;
         const double w = (1.0 - u * u) * (1.0 - u * u);
-        const double px = pts[j].x - d.x(), py = pts[j].y - d.y();
+        const double px = use[j].x - d.x(), py = use[j].y - d.y();
         // d res / d (dx, dy, a).
         const Eigen::Vector3d g(a * sample(gx, px, py), a * sample(gy, px, py), -sample(m, px, py));
         h += w * g * g.transpose();
@@ -88,9 +99,18 @@ std::vector<Eigen::Vector2d> camera_shifts(const Evidence& ev) {
       if (d.norm() > 1.5) d *= 1.5 / d.norm();
       if (step.head<2>().norm() < 1e-3 && std::abs(step.z()) < 1e-4) break;
     }
-    out[static_cast<std::size_t>(i)] = d;
+    return d;
+  };
+  std::vector<cv::Point> left, right;
+  for (const cv::Point& p : pts) (p.x < m.cols / 2 ? left : right).push_back(p);
+  tbb::parallel_for(0, ev.n, [&](int i) {
+    const auto k = static_cast<std::size_t>(i);
+    out[k] = estimate(i, pts);
+    if (left.size() >= 50 && right.size() >= 50) {
+      cs.halves_apart[k] = (estimate(i, left) - estimate(i, right)).norm();
+    }
   });
-  return out;
+  return cs;
 }
 
 }  // namespace
@@ -166,13 +186,16 @@ Evidence gather(const Source& src, int max_side) {
       }
     }
   });
-  ev.shifts_px = camera_shifts(ev);
+  CameraShifts cs = camera_shifts(ev);
+  ev.shifts_px = std::move(cs.shifts);
   std::vector<double> moved;
   for (const Eigen::Vector2d& d : ev.shifts_px) moved.push_back(d.norm());
   if (!moved.empty()) {
     const double typical = upper_median(moved);
-    ev.camera_moved = typical > kCameraMovedPx;
-    ev.undo_shifts = typical > kShiftUndoPx;
+    ev.shift_halves_apart_px = upper_median(cs.halves_apart) * ev.scale;
+    // A camera that moved moves the whole frame alike; what the lights change does not.
+    ev.camera_moved = typical > kCameraMovedPx && ev.shift_halves_apart_px <= typical * ev.scale;
+    ev.undo_shifts = ev.camera_moved && typical > kShiftUndoPx;
   }
   if (ev.camera_moved) {
     cv::dilate(ev.small_median, ev.small_median_max3, cv::Mat());
