@@ -42,7 +42,9 @@ for target in "${targets[@]}"; do
     -print_final_stats=1 -artifact_prefix="$build/findings/$target-" >"$log" 2>&1
   rc=$?
   set -e
-  runs="$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo 0)"
+  # libFuzzer prints its final stats twice when a finding stops it: the last count is taken.
+  runs="$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -n 1)"
+  runs="${runs:-0}"
   found="$(ls "$build/findings" | grep -c "^$target-" || true)"
   total=$((total + runs))
   echo "fuzz_$target: $runs executions in ${seconds} s, corpus $(ls "$corpus" | wc -l) files, findings $found (exit $rc)"

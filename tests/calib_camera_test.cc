@@ -193,6 +193,27 @@ TEST(CalibCamera, CameraJsonRoundTripsAndErrorsNameTheFile) {
     EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
   }
   EXPECT_THROW((void)read_camera_json(dir / "none.json"), Error);
+  // A size that is no int (a fraction, or a number JSON can only give as a double: converting
+  // 4.8e70 to int is undefined) is an error naming the file and the key, in the camera and in
+  // the sample-plane file alike.
+  for (const char* size : {"4.8e70", "480.5", "3000000000", "\"480\""}) {
+    std::ofstream(dir / "huge.json") << R"({"width_px": 640, "height_px": )" << size
+                                     << R"(, "fx": 800, "fy": 800, "cx": 320, "cy": 240})";
+    for (int reader = 0; reader < 2; ++reader) {
+      try {
+        if (reader == 0) {
+          (void)read_camera_json(dir / "huge.json");
+        } else {
+          (void)read_plane_json(dir / "huge.json");
+        }
+        ADD_FAILURE() << "no error for height_px " << size;
+      } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("huge.json"), std::string::npos) << what;
+        EXPECT_NE(what.find("height_px"), std::string::npos) << what;
+      }
+    }
+  }
 }
 
 CameraIntrinsics intrinsics_of(const synth::PinholeCamera& s) {

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <string>
 
 #include <Eigen/LU>
@@ -246,8 +247,10 @@ CameraIntrinsics read_camera_json(const std::filesystem::path& path) {
   const nlohmann::json j = read_json_object(path, "camera file");
   CameraIntrinsics c;
   try {
-    c.width_px = j.at("width_px").get<int>();
-    c.height_px = j.at("height_px").get<int>();
+    c.width_px = json_int(j, "width_px", std::numeric_limits<int>::min(),
+                          std::numeric_limits<int>::max(), where);
+    c.height_px = json_int(j, "height_px", std::numeric_limits<int>::min(),
+                           std::numeric_limits<int>::max(), where);
     c.fx = j.at("fx").get<double>();
     c.fy = j.at("fy").get<double>();
     c.cx = j.at("cx").get<double>();

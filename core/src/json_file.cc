@@ -23,4 +23,27 @@ nlohmann::json read_json_object(const std::filesystem::path& path, std::string_v
   return j;
 }
 
+int json_int(const nlohmann::json& j, const char* key, long long lo, long long hi,
+             const std::string& where) {
+  if (!j.is_object() || !j.contains(key)) throw Error(where + ": missing \"" + key + "\"");
+  const nlohmann::json& v = j.at(key);
+  // Appended piece by piece: GCC 12 warns (-Wrestrict, falsely) on the one-expression form.
+  std::string range = "[";
+  range += std::to_string(lo);
+  range += ", ";
+  range += std::to_string(hi);
+  range += "]";
+  if (!v.is_number_integer()) {
+    throw Error(where + ": \"" + key + "\" must be an integer in " + range);
+  }
+  // Compared in 64 bits: an unsigned value beyond long long is out of any int range.
+  const bool inside =
+      v.is_number_unsigned()
+          ? v.get<unsigned long long>() <= static_cast<unsigned long long>(hi) &&
+                (lo <= 0 || v.get<unsigned long long>() >= static_cast<unsigned long long>(lo))
+          : v.get<long long>() >= lo && v.get<long long>() <= hi;
+  if (!inside) throw Error(where + ": \"" + key + "\" must be an integer in " + range);
+  return static_cast<int>(v.get<long long>());
+}
+
 }  // namespace ptmkit

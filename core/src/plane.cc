@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -80,8 +81,10 @@ SamplePlane read_plane_json(const std::filesystem::path& path) {
   const nlohmann::json j = read_json_object(path, "sample-plane file");
   SamplePlane plane;
   try {
-    plane.width_px = j.at("width_px").get<int>();
-    plane.height_px = j.at("height_px").get<int>();
+    plane.width_px = json_int(j, "width_px", std::numeric_limits<int>::min(),
+                              std::numeric_limits<int>::max(), where);
+    plane.height_px = json_int(j, "height_px", std::numeric_limits<int>::min(),
+                               std::numeric_limits<int>::max(), where);
   } catch (const json::exception&) {
     throw Error(where + ": width_px and height_px must be integers");
   }

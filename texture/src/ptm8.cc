@@ -14,6 +14,7 @@
 #include "ptmkit/core/error.h"
 #include "ptmkit/core/holdout.h"
 #include "ptmkit/core/image_io.h"
+#include "ptmkit/core/json_file.h"
 #include "ptmkit/core/light_layout.h"
 #include "ptmkit/texture/integer_model.h"
 #include "ptmkit/texture/ptm.h"
@@ -213,10 +214,13 @@ Ptm8Texture read_ptm8(const fs::path& folder) {
   }
   Ptm8Texture t;
   try {
-    if (j.at("format").get<std::string>() != "ptmkit-ptm8" || j.at("version").get<int>() != 1)
+    constexpr long long kIntMin = std::numeric_limits<int>::min();
+    constexpr long long kIntMax = std::numeric_limits<int>::max();
+    if (j.at("format").get<std::string>() != "ptmkit-ptm8" ||
+        json_int(j, "version", kIntMin, kIntMax, "manifest") != 1)
       throw Error("not a version 1 ptmkit-ptm8 manifest");
-    t.width = j.at("width").get<int>();
-    t.height = j.at("height").get<int>();
+    t.width = json_int(j, "width", kIntMin, kIntMax, "manifest");
+    t.height = json_int(j, "height", kIntMin, kIntMax, "manifest");
     if (t.width <= 0 || t.height <= 0 || t.width > (1 << 20) || t.height > (1 << 20))
       throw Error("bad size");
     const std::string model = j.at("model").get<std::string>();
@@ -224,9 +228,12 @@ Ptm8Texture read_ptm8(const fs::path& folder) {
     t.model = model == "rgb" ? ColourModel::kRGB : ColourModel::kLRGB;
     t.colour_space = j.at("colour_space").get<std::string>() == "linear" ? ColourSpace::kLinear
                                                                          : ColourSpace::kSRGB;
-    if (j.at("bias").get<int>() != kPtm8Bias) throw Error("bias must be 127");
+    if (json_int(j, "bias", kIntMin, kIntMax, "manifest") != kPtm8Bias)
+      throw Error("bias must be 127");
     const auto& s = j.at("shifts");
-    t.shifts = {s.at("high").get<int>(), s.at("mid").get<int>(), s.at("low").get<int>()};
+    t.shifts = {json_int(s, "high", kIntMin, kIntMax, "shifts"),
+                json_int(s, "mid", kIntMin, kIntMax, "shifts"),
+                json_int(s, "low", kIntMin, kIntMax, "shifts")};
     for (int v : t.shifts)
       if (v < kPtm8MinShift || v > kPtm8MaxShift) throw Error("shift out of range -8..24");
     if (static_cast<int>(j.at("planes").size()) != t.polynomials())

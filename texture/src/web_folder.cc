@@ -202,7 +202,10 @@ WebFolderInfo read_web_info(const fs::path& path) {
                 std::to_string(expected) + " planes, 'nplanes' says " +
                 std::to_string(info.nplanes));
   }
-  if (j.contains("quality") && j["quality"].is_number()) info.quality = j["quality"].get<int>();
+  if (j.contains("quality") && j["quality"].is_number_integer() &&
+      j["quality"].get<long long>() >= 0 && j["quality"].get<long long>() <= 100) {
+    info.quality = j["quality"].get<int>();
+  }
   if (j.contains("pixelSizeInMM") && j["pixelSizeInMM"].is_number()) {
     info.pixel_size_mm = j["pixelSizeInMM"].get<double>();
   }
