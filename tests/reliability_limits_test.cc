@@ -171,7 +171,7 @@ TEST_F(ReliabilityLimits, BoardGridsAndTagIdsAreBounded) {
               "passes the largest tag id");
   board_error(R"({"tag_size_mm": 10, "grid": {"cols": 4, "rows": 4, "spacing_mm": 12,
               "first_id": 99999999999}})",
-              "out of range");
+              "must be an integer in");
 }
 
 TEST_F(ReliabilityLimits, RingLayoutsAreBoundedPerRingAndInAll) {

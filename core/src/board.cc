@@ -72,20 +72,9 @@ double number(const json& j, const char* key, const std::string& where) {
   return v.get<double>();
 }
 
+// Tag ids and grid sizes, range-checked in 64 bits before the conversion to int.
 int integer(const json& j, const char* key, const std::string& where) {
-  if (!j.contains(key)) throw Error(where + ": missing \"" + key + "\"");
-  const json& v = j.at(key);
-  if (!v.is_number_integer()) throw Error(where + ": \"" + key + "\" must be an integer");
-  // Range-checked in 64 bits: get<int>() would wrap a value beyond int.
-  const bool too_big =
-      v.is_number_unsigned()
-          ? v.get<unsigned long long>() > static_cast<unsigned long long>(kMaxTagId)
-          : v.get<long long>() > kMaxTagId || v.get<long long>() < -kMaxTagId;
-  if (too_big) {
-    throw Error(where + ": \"" + key + "\" is out of range (" + excerpt(v.dump()) + ")");
-  }
-  const long long x = v.get<long long>();
-  return static_cast<int>(x);
+  return json_int(j, key, -kMaxTagId, kMaxTagId, where);
 }
 
 Eigen::Vector2d point(const json& v, const std::string& what, const std::string& where) {

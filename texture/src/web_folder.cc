@@ -13,6 +13,7 @@
 
 #include "jpeg_codec.h"
 #include "ptmkit/core/error.h"
+#include "ptmkit/core/json_file.h"
 #include "ptmkit/texture/formats.h"
 #include "ptmkit/texture/ptm.h"
 
@@ -149,12 +150,7 @@ WebFolderInfo read_web_info(const fs::path& path) {
       if (required) throw Error(at + "no '" + key + "'");
       return fallback;
     }
-    const auto& v = j[key];
-    if (!v.is_number_integer() || v.get<long long>() <= 0 || v.get<long long>() > kMaxPtmSide) {
-      throw Error(at + "'" + key + "' is not a positive integer of at most " +
-                  std::to_string(kMaxPtmSide));
-    }
-    return v.get<int>();
+    return json_int(j, key, 1, kMaxPtmSide, where(json_path));
   };
   auto text = [&](const char* key, const char* fallback) {
     if (!j.contains(key)) {
