@@ -125,22 +125,9 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
   // The camera's measured shifts against the render's, both taken about their own mean (the
   // stack's median, which the shifts are measured against, sits near the images' mean place).
   if (!r.image_shifts_px.empty() && r.image_shifts_px.size() == truth.light_dirs.size()) {
-    const std::size_t n = r.image_shifts_px.size();
-    Eigen::Vector2d mean_found = Eigen::Vector2d::Zero(), mean_true = Eigen::Vector2d::Zero();
-    for (std::size_t i = 0; i < n; ++i) {
-      mean_found += r.image_shifts_px[i] / static_cast<double>(n);
-      mean_true += synth::shake_offset_px(po, static_cast<int>(i)) / static_cast<double>(n);
-    }
-    double sq = 0.0, worst = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double e = ((r.image_shifts_px[i] - mean_found) -
-                        (synth::shake_offset_px(po, static_cast<int>(i)) - mean_true))
-                           .norm();
-      sq += e * e / static_cast<double>(n);
-      worst = std::max(worst, e);
-    }
+    const synth::ShakeError e = synth::shake_error(po, r.image_shifts_px);
     std::printf("  camera moved: shifts %s, off the render's by %.3f px rms, %.3f at worst\n",
-                r.image_shifts_undone ? "undone" : "not undone", std::sqrt(sq), worst);
+                r.image_shifts_undone ? "undone" : "not undone", e.rms_px, e.worst_px);
   }
   for (std::size_t i = 0; per_light && i < truth.light_dirs.size(); ++i) {
     const double elevation =

@@ -271,6 +271,23 @@ constexpr double kPolishStepPx = 0.25;
 constexpr double kPolishSigmaPx = 0.7;
 constexpr double kPolishSupport = 0.9;
 constexpr double kPolishMaxMovePx = 1.0;
+// The limb's profile (LimbProfileModel) is fitted from kLimbInsidePx inside the rim to
+// kLimbOutsidePx outside it.
+constexpr double kLimbInsidePx = 3.5;
+constexpr double kLimbOutsidePx = 3.0;
+// The limb's climb to half the sphere's contrast spans 0.0085 of the radius (Schlick: cos theta
+// 0.13): under a pixel's blur below about 90 px, where the limb is hard to tell from a step, the
+// steepest point is kept. On the 42 px spheres of the 640 x 360 renders (seeds 1-3) the limb's
+// model gave circles 0.01-0.12% off in a dark room against 0.00-0.06% (glass seed 1's lights
+// 0.20 to 0.23 degrees mean), and took lit-room chrome from 0.28-0.31 to 0.24-0.25.
+constexpr double kLimbMinRadiusPx = 88.0;
+// The limb's climb over its window must stand this many times above the fit's rms residual,
+// and the limb's model leave at most kLimbEvidence of the step's residual. Under read noise of 6
+// grey levels in a dark room neither model is clearly the better; the large sphere's lights
+// (seeds 1-3, mean degrees) were 0.46 / 0.12 / 0.21 by the steepest point, 0.46 / 0.25 / 0.23
+// with the limb taken wherever it fitted better, 0.43 / 0.13 / 0.26 with kLimbEvidence.
+constexpr double kLimbMinContrast = 10.0;
+constexpr double kLimbEvidence = 0.5;
 
 // A sphere whose clipped cores have at least this many pixels (median over the images) shows
 // the light as a disc: a core kMergedCoreRatio times as large is cut back to it (cut_to_disc).
@@ -991,11 +1008,20 @@ Circle outer_rim(const cv::Mat& f, const Circle& inner, const OutlinePlane& op, 
 //   inner side moves the steepest point outward;
 // - smoothed by kPolishSigmaPx, not 1 px: smoothing moves an edge with a darker band inside
 //   and a brighter skirt outside toward the skirt.
+// - on a sphere whose limb's climb is resolved (kLimbMinRadiusPx), by the limb's own profile
+//   where that explains the ray better than a step (LimbProfileModel): a black ball against a
+//   lit wall brightens over its last pixels as its reflectance rises to 1, and the steepest
+//   point of that climb lies 0.5-0.8 px inside the outline (photo-large-sphere in a lit room,
+//   seeds 1-3: circles 0.25-0.39% small, lights 0.33-0.48 degrees mean; on the limb 0.06-0.09%,
+//   0.10-0.11 degrees). `limb_rays_out` gets the rays so located where the polished circle is
+//   returned (0 otherwise).
 // The polished circle replaces the rim's where it keeps kPolishSupport of the edge points and
 // lies within kPolishMaxMovePx. On the photographic renders (640 x 360, seeds 1-3), black
 // glossy balls lying on the cloth: light means 0.55-0.63 to 0.29-0.36 degrees in a dark room;
 // the other presets' means move by -0.22 to +0.06 (docs/CALIBRATION.md).
-Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& op, bool srgb) {
+Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& op, bool srgb,
+                  int* limb_rays_out) {
+  if (limb_rays_out != nullptr) *limb_rays_out = 0;
   if (rim.outline_px.size() < 8) return rim;
   // The region the rays and the smoothing reach.
   const double reach = rim.radius_px + kPolishBandPx + 3.0 * kPolishSigmaPx + 2.0;
@@ -1029,19 +1055,43 @@ Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& o
   std::sort(levels.begin(), levels.end());
   const float lo = levels[levels.size() / 100], hi = levels[levels.size() * 99 / 100];
   if (!(hi - lo > 1e-6f)) return rim;
+  const cv::Mat lin = f.clone();  // linear light, for the limb's profile
   f.convertTo(f, CV_32F, 255.0 / (hi - lo), -255.0 * lo / (hi - lo));
   cv::GaussianBlur(f, f, cv::Size(0, 0), kPolishSigmaPx);
   std::vector<Eigen::Vector2d> pts;
   const double t0 = rim.radius_px - kPolishBandPx, t1 = rim.radius_px + kPolishBandPx;
+  // The limb's climb is resolved where it spans more than the blur (kLimbMinRadiusPx).
+  const bool resolved = rim.radius_px >= kLimbMinRadiusPx;
+  std::optional<LimbProfileModel> limb;
+  if (resolved) limb.emplace(rim.radius_px);
+  const double l0 = rim.radius_px - kLimbInsidePx, l1 = rim.radius_px + kLimbOutsidePx;
+  int limb_rays = 0;
+  std::vector<double> prof;
   for (const Eigen::Vector2d& q : rim.outline_px) {
     const Eigen::Vector2d d = q - rim.centre_px;
     if (!(d.norm() > 0.0)) continue;
     const Eigen::Vector2d dir = d.normalized();
     double t = 0.0;
-    if (in_region(centre + t0 * dir) && in_region(centre + t1 * dir) &&
-        edge_on_ray(f, centre, dir, t0, t1, kPolishStepPx, &t)) {
-      pts.push_back(op.to(rim.centre_px + t * dir));
+    bool found = in_region(centre + t0 * dir) && in_region(centre + t1 * dir) &&
+                 edge_on_ray(f, centre, dir, t0, t1, kPolishStepPx, &t);
+    if (resolved && in_region(centre + l0 * dir) && in_region(centre + l1 * dir)) {
+      ray_profile(lin, centre, dir, l0, l1 + 1e-9, kPolishStepPx, &prof);
+      const LimbProfileModel::Fit fit = limb->fit(prof, l0, kPolishStepPx, t0, t1);
+      // A climb well above what neither model explains: the limb's outline where its model is
+      // clearly the better; elsewhere the steepest point as before, or the step's place on a
+      // ray whose edge is too faint for the stretched composite.
+      if (fit.valid && fit.limb_amplitude > kLimbMinContrast * fit.limb_rms) {
+        if (fit.limb_sse < kLimbEvidence * fit.step_sse) {
+          t = fit.limb_px;
+          found = true;
+          ++limb_rays;
+        } else if (!found) {
+          t = fit.step_px;
+          found = true;
+        }
+      }
     }
+    if (found) pts.push_back(op.to(rim.centre_px + t * dir));
   }
   double share = 0.0;
   const Circle r = op.from(consensus_circle(pts, op.to(rim), &share, kRimChoiceTolPx));
@@ -1053,6 +1103,7 @@ Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& o
       std::abs(r.radius_px - rim.radius_px) > kPolishMaxMovePx) {
     return rim;
   }
+  if (limb_rays_out != nullptr) *limb_rays_out = limb_rays;
   return r;
 }
 
@@ -1258,7 +1309,17 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       // encoded samples across each block, mixing an edge's two sides after encoding, which
       // decoding does not undo (glass at 640 x 360 analysed at scale 2: circles 0.01-0.08%
       // off on the block median, 0.16-0.50% once polished there).
-      if (best_plane != nullptr) best = polish_rim(*best_plane, best, photo_plane, ev.srgb);
+      if (best_plane != nullptr) {
+        int limb_rays = 0;
+        const Circle polished = polish_rim(*best_plane, best, photo_plane, ev.srgb, &limb_rays);
+        if (limb_rays > 0) {
+          char buf[160];
+          std::snprintf(buf, sizeof(buf), "; outline on the limb's profile on %d of %zu rays",
+                        limb_rays, best.outline_px.size());
+          cand.note += buf;
+        }
+        best = polished;
+      }
       circles.push_back(best);
     }
     std::sort(circles.begin(), circles.end(), [](const Circle& a, const Circle& b) {

@@ -1,5 +1,7 @@
 // The photo renderer's public face: PhotoRenderer and the capture folder with its truth.
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include <tbb/parallel_for.h>
@@ -27,6 +29,28 @@ double exposure_factor(const PhotoOptions& options, int index) {
 
 Eigen::Vector2d shake_offset_px(const PhotoOptions& options, int index) {
   return detail::shake_offset(options, index);
+}
+
+ShakeError shake_error(const PhotoOptions& options,
+                       const std::vector<Eigen::Vector2d>& measured_px) {
+  const std::size_t n = measured_px.size();
+  if (n == 0) throw Error("synth photo: no measured shifts to compare with the render's");
+  Eigen::Vector2d mean_found = Eigen::Vector2d::Zero(), mean_true = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    mean_found += measured_px[i] / static_cast<double>(n);
+    mean_true += shake_offset_px(options, static_cast<int>(i)) / static_cast<double>(n);
+  }
+  ShakeError e;
+  double sq = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = ((measured_px[i] - mean_found) -
+                      (shake_offset_px(options, static_cast<int>(i)) - mean_true))
+                         .norm();
+    sq += d * d / static_cast<double>(n);
+    e.worst_px = std::max(e.worst_px, d);
+  }
+  e.rms_px = std::sqrt(sq);
+  return e;
 }
 
 PhotoRenderer::PhotoRenderer(const PhotoOptions& options) : impl_(new Impl(options)) {}

@@ -284,6 +284,17 @@ struct PhotoTruth {
 [[nodiscard]] double exposure_factor(const PhotoOptions& options, int index);
 [[nodiscard]] Eigen::Vector2d shake_offset_px(const PhotoOptions& options, int index);
 
+// How far shifts measured per image (photo pixels, one per light, in order) lie from the
+// renders' shake_offset_px, each set taken about its own mean (shifts measured against a
+// stack's median are known up to a common offset): rms and worst, pixels. Throws
+// ptmkit::Error when there are none.
+struct ShakeError {
+  double rms_px = 0.0;
+  double worst_px = 0.0;
+};
+[[nodiscard]] ShakeError shake_error(const PhotoOptions& options,
+                                     const std::vector<Eigen::Vector2d>& measured_px);
+
 // A photo capture in memory: the scene built once, then any light rendered.
 class PhotoRenderer {
  public:
