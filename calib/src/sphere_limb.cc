@@ -49,7 +49,6 @@ LimbProfileModel::LimbProfileModel(double radius_px) {
   for (double& x : w) x /= wsum;
   for (const double sigma : kLimbSigmasPx) {
     Table t;
-    t.sigma_px = sigma;
     t.step.resize(static_cast<std::size_t>(n));
     t.limb.resize(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) {
@@ -143,8 +142,6 @@ LimbProfileModel::Fit LimbProfileModel::fit(const std::vector<double>& prof, dou
     if (e < best.limb_sse) {
       best.limb_sse = e;
       best.limb_px = r;
-      best.limb_sigma_px = t.sigma_px;
-      best.limb_contrast = c;
       const double t_last = t0 + step * static_cast<double>(n - 1);
       best.limb_amplitude =
           std::abs(c) * std::abs(Table::at(t.limb, r - t0) - Table::at(t.limb, r - t_last));
@@ -154,7 +151,6 @@ LimbProfileModel::Fit LimbProfileModel::fit(const std::vector<double>& prof, dou
     if (e < best.step_sse) {
       best.step_sse = e;
       best.step_px = r;
-      best.step_sigma_px = t.sigma_px;
     }
   }
   best.valid = std::isfinite(best.limb_sse) && std::isfinite(best.step_sse);

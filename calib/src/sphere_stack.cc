@@ -1060,10 +1060,9 @@ Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& o
   cv::GaussianBlur(f, f, cv::Size(0, 0), kPolishSigmaPx);
   std::vector<Eigen::Vector2d> pts;
   const double t0 = rim.radius_px - kPolishBandPx, t1 = rim.radius_px + kPolishBandPx;
-  // The limb's climb is resolved where it spans more than the blur (kLimbMinRadiusPx).
-  const bool resolved = rim.radius_px >= kLimbMinRadiusPx;
+  // Only where the limb's climb spans more than the blur (kLimbMinRadiusPx).
   std::optional<LimbProfileModel> limb;
-  if (resolved) limb.emplace(rim.radius_px);
+  if (rim.radius_px >= kLimbMinRadiusPx) limb.emplace(rim.radius_px);
   const double l0 = rim.radius_px - kLimbInsidePx, l1 = rim.radius_px + kLimbOutsidePx;
   int limb_rays = 0;
   std::vector<double> prof;
@@ -1074,12 +1073,12 @@ Circle polish_rim(const cv::Mat& plane, const Circle& rim, const OutlinePlane& o
     double t = 0.0;
     bool found = in_region(centre + t0 * dir) && in_region(centre + t1 * dir) &&
                  edge_on_ray(f, centre, dir, t0, t1, kPolishStepPx, &t);
-    if (resolved && in_region(centre + l0 * dir) && in_region(centre + l1 * dir)) {
+    if (limb && in_region(centre + l0 * dir) && in_region(centre + l1 * dir)) {
       ray_profile(lin, centre, dir, l0, l1 + 1e-9, kPolishStepPx, &prof);
       const LimbProfileModel::Fit fit = limb->fit(prof, l0, kPolishStepPx, t0, t1);
-      // A climb well above what neither model explains: the limb's outline where its model is
-      // clearly the better; elsewhere the steepest point as before, or the step's place on a
-      // ray whose edge is too faint for the stretched composite.
+      // Where the ray shows a climb well above the fit's residual: the limb's outline where its
+      // model is clearly the better; elsewhere the steepest point as before, or the step's
+      // place on a ray whose edge is too faint for the stretched composite.
       if (fit.valid && fit.limb_amplitude > kLimbMinContrast * fit.limb_rms) {
         if (fit.limb_sse < kLimbEvidence * fit.step_sse) {
           t = fit.limb_px;

@@ -309,12 +309,10 @@ class LimbProfileModel {
   struct Fit {
     bool valid = false;
     double limb_px = 0.0, limb_sse = std::numeric_limits<double>::infinity();
-    double limb_sigma_px = 0.0, limb_contrast = 0.0;
-    // The limb model's climb over the window (|contrast| times its shape's range there) and
+    // The limb model's climb over the window (its contrast times its shape's range there) and
     // its rms residual: how clearly the ray shows a limb at all.
     double limb_amplitude = 0.0, limb_rms = 0.0;
     double step_px = 0.0, step_sse = std::numeric_limits<double>::infinity();
-    double step_sigma_px = 0.0;
   };
   // prof[i] sampled at t0 + i step (linear light), the outline sought within [lo, hi] (the same
   // units as t).
@@ -323,7 +321,6 @@ class LimbProfileModel {
 
  private:
   struct Table {
-    double sigma_px = 0.0;
     std::vector<double> step, limb;  // on u = R - t, from -reach by 1/64 px
     static double at(const std::vector<double>& f, double u);
   };
