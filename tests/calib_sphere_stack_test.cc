@@ -979,6 +979,55 @@ TEST(CalibSphereStack, ALightHiddenFromTheCameraIsNotTakenFromTheLitScene) {
   EXPECT_LE(run.max_deg, kLightMaxTargetDeg);
 }
 
+// A glass ball of 180 px in a lit room, seed 4. Glass focuses each light it lets in into a
+// glow on its far side; a light that reflects where the base hides it leaves only that glow,
+// at the limb. Counted as a light's reflection below the sample plane, the glow cost the
+// outline's circle its geometry (0.75), and a circle 10 px inside it that put no light below
+// was kept in its place; a circle 45% too large then scored above that one, and its lights were
+// written 59 degrees off on average. On a large glass ball a spot that is unclipped beside
+// clipped reflections, or far broader or smaller than they are, is no reflection.
+TEST(CalibSphereStack, AGlassBallsGlowDoesNotShrinkItsOutline) {
+  PTMKIT_RELEASE_BUILD_ONLY();
+  synth::PhotoOptions po = synth::photo_preset_options("photo-large-sphere");
+  po.seed = 4;
+  po.environment = synth::PhotoEnvironment::kLit;
+  for (synth::PhotoSphere& sp : po.spheres) sp.material = synth::SphereMaterial::kGlass;
+  const LargeSphereRun run = calibrate_large_sphere(po);
+  expect_large_sphere(run, "glass, lit room", kCentreTargetPx, kRadiusTargetRel,
+                      kLightMeanTargetDeg);
+  EXPECT_EQ(run.result.material, SphereMaterial::kGlass) << run.result.material_note;
+}
+
+// The same glass ball in a dark room, seed 1: five lights reflect where the camera cannot see
+// them, and in three of their images the brightest spot is the glow, a clipped region many
+// times a reflection's size (or, at the limb, an unclipped one). With the outline found, the
+// glow's clipped core taken as the highlight was written as a light 89 degrees off. Glow is
+// told by its size against the ball's reflections and never taken: every hidden light is
+// flagged, and every light written is a reflection (the circle here is 0.5% small, which leaves
+// the lights about 0.6 degrees off; a glow is tens).
+TEST(CalibSphereStack, AGlassBallsGlowIsNeverTakenForALight) {
+  PTMKIT_RELEASE_BUILD_ONLY();
+  synth::PhotoOptions po = synth::photo_preset_options("photo-large-sphere");
+  po.seed = 1;
+  for (synth::PhotoSphere& sp : po.spheres) sp.material = synth::SphereMaterial::kGlass;
+  const LargeSphereRun run = calibrate_large_sphere(po);
+  ASSERT_EQ(run.result.rig.spheres.size(), 1u);
+  const SphereReport& sphere = run.result.rig.spheres[0];
+  int glow_flags = 0;
+  for (std::size_t i = 0; i < run.truth.light_dirs.size(); ++i) {
+    const bool visible = run.truth.spheres[0].highlight_px[i].has_value();
+    EXPECT_EQ(run.result.rig.lights[i].found, visible)
+        << "light " << i << ": " << sphere.lights[i].flag;
+    if (sphere.lights[i].flag.find("refracted hot spot's glow") != std::string::npos) ++glow_flags;
+  }
+  std::printf(
+      "glass ball, dark room: %d of %d visible lights written, mean %.2f max %.2f deg; %d "
+      "flagged as glow\n",
+      run.used, run.visible, run.mean_deg, run.max_deg, glow_flags);
+  EXPECT_GE(glow_flags, 1);
+  EXPECT_LE(run.max_deg, 2.0);
+}
+
 // A dark room photographed at a high gain: read noise of 6 grey levels (0.056 in the JPEG's
 // sRGB values on the black ball and the room; the presets' is 1). Some pixel of any small disc
 // then rises 0.2-0.28 above the stack's median in every image, and a 16 px circle that Hough

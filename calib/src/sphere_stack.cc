@@ -249,6 +249,8 @@ constexpr double kRimRefineBand = 0.12;
 // reaches 0.50 (1280 x 720, 12 lights, four 80 degrees up), and a cup or a shadow around the
 // other presets' spheres lies beyond the band (1.15-1.18 r) or on at most 0.4.
 constexpr double kConcentricRimMin = 0.6;
+// See SphereCandidate::glass_outline.
+constexpr double kGlassOutlineSlack = 0.01;
 constexpr double kConcentricRimGap = 0.03;
 
 // How sharp a composite shows a rim: the share of rays whose edge lies within this many of its
@@ -303,6 +305,7 @@ constexpr double kMergedCoreGain = 0.9;
 // glow 150-200).
 constexpr double kGlareCoreRatio = 8.0;
 constexpr int kGlareCoreMinPixels = 40;
+
 // A saturated core is compact, whatever DetectOptions::max_blob_area_fraction says, up to
 // kUsualCoreSlack times the sphere's usual clipped core (its median over the images), and
 // never beyond kMaxUsualCoreFraction of the sphere's area. An overexposed mirror sphere shows
@@ -1194,10 +1197,16 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       const auto keeps_lights_above = [&](const Circle& r) {
         return below_plane_spots(cand, r, det.camera, ev, 1) <= cand.below_plane_spots;
       };
+      // A glass ball's outline found in the maximum (SphereCandidate::glass_outline): the
+      // median's edges inside it are the room seen through the glass.
+      const auto outside_glass_floor = [&](const Circle& r) {
+        return !cand.glass_outline || r.radius_px >= (1.0 - kGlassOutlineSlack) * c.radius_px;
+      };
       const auto near_candidate = [&](const Circle& r) {
         const double tol = 0.05 * c.radius_px + ev.scale;
         return (r.centre_px - c.centre_px).norm() < tol &&
-               std::abs(r.radius_px - c.radius_px) < tol && keeps_lights_above(r);
+               std::abs(r.radius_px - c.radius_px) < tol && keeps_lights_above(r) &&
+               outside_glass_floor(r);
       };
       Circle best = c;
       double best_rim = 0.0, best_tight = 0.0;
@@ -1243,7 +1252,8 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
           const Circle r = rim_circle(smoothed(plane, logarithm), cs, op, &sr.rim, &sr.tight);
           if (sr.rim < 0.3) continue;
           sr.circle = to_photo(r, ev.scale);
-          sr.found = must_be_near ? near_candidate(sr.circle) : keeps_lights_above(sr.circle);
+          sr.found = must_be_near ? near_candidate(sr.circle)
+                                  : keeps_lights_above(sr.circle) && outside_glass_floor(sr.circle);
           break;
         }
         return sr;
@@ -1505,11 +1515,52 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     out.material = options.material;
     out.material_note = "given (--sphere-material)";
   }
+  // On glass, the refracted hot spot's glow told from the light's reflection by its size
+  // (reflection_spot_area, not_a_reflection): where no spot of an image is left, its reflection
+  // is hidden.
+  std::vector<std::vector<char>> glow_only(k_spheres,
+                                           std::vector<char>(static_cast<std::size_t>(ev.n), 0));
+  if (out.material == SphereMaterial::kGlass) {
+    for (std::size_t k = 0; k < k_spheres; ++k) {
+      if (circles[k].radius_px < kGlowRuleMinRadiusPx) continue;
+      const std::optional<double> area = reflection_spot_area(spots_of[k]);
+      if (!area) continue;
+      for (int i = 0; i < ev.n; ++i) {
+        const auto ii = static_cast<std::size_t>(i);
+        std::vector<Spot>& spots = spots_of[k][ii];
+        if (spots.empty() || settled[ii]) continue;
+        const auto glow = [&](const Spot& sp) { return not_a_reflection(sp, *area); };
+        const Spot taken = spots[static_cast<std::size_t>(rank[k][ii])];
+        const bool taken_glow = glow(taken);
+        std::erase_if(spots, glow);
+        if (spots.empty()) {
+          glow_only[k][ii] = 1;
+          continue;
+        }
+        // The spot taken keeps its place among the rest; a glow taken gives it to the brightest
+        // reflection.
+        int r = 0;
+        if (!taken_glow) {
+          for (std::size_t q = 0; q < spots.size(); ++q) {
+            if (spots[q].centre_small == taken.centre_small) r = static_cast<int>(q);
+          }
+        }
+        rank[k][ii] = r;
+      }
+    }
+  }
   for (std::size_t k = 0; k < k_spheres; ++k) {
     for (int i = 0; i < ev.n; ++i) {
       const auto ii = static_cast<std::size_t>(i);
       SphereLight& light = reports[k].lights[ii];
       const std::vector<Spot>& spots = spots_of[k][ii];
+      if (glow_only[k][ii]) {
+        light.flag =
+            "no highlight on the sphere: only the refracted hot spot's glow (broader than the "
+            "sphere's reflections, or unclipped where they clip) or pieces of flare; the light's "
+            "reflection is hidden";
+        continue;
+      }
       if (spots.empty()) {
         if (faint_lift[k][ii] > 0.0) {
           char why[200];

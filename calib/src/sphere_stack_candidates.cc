@@ -259,6 +259,13 @@ constexpr double kGrownMaxShift = 0.1;
 // the horizon mirrored in a chrome ball reflects 3 of 8 below, 8 of 22.
 constexpr double kBelowPlaneCost = 2.0;
 
+// Where at least this share of the track's spots are clipped, the sphere clips its lights'
+// reflections, and an unclipped spot is not one: on a glass ball it is the refracted hot
+// spot's glow, which appears on the side away from the light, at the limb for a light whose
+// own reflection the base hides (a 180 px glass ball: such glows lift it by 0.31-0.71 where
+// its reflections clip, and its outline reflected them to below the plane in 2 of 9 images).
+constexpr double kClippedTrackShare = 0.75;
+
 // A moving spot is compact, a light's reflection rather than a broad change of the scene,
 // within this share of the disc (a chrome ball's highlight blooms)...
 constexpr double kCompactSpotShare = 0.1;
@@ -303,7 +310,7 @@ BloomSize bloom_size(const std::vector<std::vector<Spot>>& spots_of, double disc
 // own support beside the sharper circle inside it that it grew from).
 SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>& comps,
                                 const Circle& c, double min_peak, const SphereCamera& camera,
-                                double rim_band) {
+                                double rim_band, bool* glass_like = nullptr) {
   SphereCandidate out;
   out.circle = c;
   for (const Composite& comp : comps) {
@@ -326,6 +333,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   const double disc = std::numbers::pi * c.radius_px * c.radius_px;
   std::vector<Eigen::Vector2d> places;
   std::vector<double> lifts;  // per place: its spot's lift in linear light
+  std::vector<double> peaks;  // per place: its spot's peak
   std::vector<std::vector<Spot>> spots_of(static_cast<std::size_t>(ev.n));
   out.spots_px.assign(static_cast<std::size_t>(ev.n), std::nullopt);
   for (int i = 0; i < ev.n; ++i) {
@@ -333,6 +341,15 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
         moving_spots(ev, i, c.centre_px, 0.97 * c.radius_px, min_peak);
   }
   const BloomSize bloom = bloom_size(spots_of, disc);
+  // Glass-like: a quarter of the images show two comparable spots across the centre. On a
+  // large one the glow, told by size against its reflections, is no light's reflection.
+  const int across = across_spot_images(spots_of, c.centre_px);
+  const bool glass = across > 0 && across >= kGlassTwoSpotShare * ev.n;
+  const bool large = c.radius_px * ev.scale >= kGlowRuleMinRadiusPx;
+  if (glass_like != nullptr) *glass_like = glass && large;
+  // 0: unknown (not glass, small, or no common reflection size).
+  const double reflection_area =
+      glass && large ? reflection_spot_area(spots_of).value_or(0.0) : 0.0;
   const auto compact = [&](const Spot& s) {
     return s.area <= std::max(kCompactSpotShare * disc, 4.0) || bloom.holds(s);
   };
@@ -343,6 +360,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
     if (!compact(s)) continue;
     places.push_back(s.centre_small);
     lifts.push_back(s.lift_linear);
+    peaks.push_back(s.peak);
     out.spots_px[static_cast<std::size_t>(i)] = s.centre_small;
   }
   out.moving_spots = static_cast<int>(places.size());
@@ -353,9 +371,19 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   out.light_spots_px.assign(static_cast<std::size_t>(ev.n), {});
   if (!lifts.empty()) {
     const double light_lift = highlight_lift(lifts);
+    int bright_places = 0, clipped_places = 0;
+    for (std::size_t k = 0; k < lifts.size(); ++k) {
+      if (lifts[k] < kLightLiftShare * light_lift) continue;
+      ++bright_places;
+      if (peaks[k] >= kSpotClip) ++clipped_places;
+    }
+    const bool clipped_track = static_cast<double>(clipped_places) >=
+                               kClippedTrackShare * static_cast<double>(bright_places);
     for (std::size_t i = 0; i < spots_of.size(); ++i) {
       for (const Spot& sp : spots_of[i]) {
-        if (sp.lift_linear >= kLightLiftShare * light_lift && compact(sp)) {
+        if (sp.lift_linear >= kLightLiftShare * light_lift && compact(sp) &&
+            (!clipped_track || sp.peak >= kSpotClip) &&
+            !(reflection_area > 0.0 && not_a_reflection(sp, reflection_area))) {
           out.light_spots_px[i].push_back(sp.centre_small);
         }
       }
@@ -388,6 +416,16 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   out.score = std::min(1.0, out.rim / 0.3) * out.track * out.geometry;
   return out;
 }
+
+// A glass ball shows the room refracted and reflected inside its outline, and in a dark room
+// the stack's median holds only those images, whose edges end a few pixels inside the limb (a
+// 180 px ball: 1-12 px); the stack's maximum, where the glow of the refracted light fills the
+// ball image after image, ends at the outline. Where a candidate is glass-like (a quarter of
+// the images show a second comparable spot across its centre), its rim is also looked for in
+// the maximum from kGlassOutlineGrow times its radius within kGlassOutlineBand, and a larger
+// concentric circle found there on 30% of the rays, scoring no less, is taken.
+constexpr double kGlassOutlineGrow = 1.03;
+constexpr double kGlassOutlineBand = 0.06;
 
 // Two circles whose centres and radii each differ by less than `tol` of the larger radius.
 bool same_circle(const Circle& a, const Circle& b, double tol) {
@@ -537,7 +575,30 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
           (best.centre_px - rough.centre_px).norm() > kGrownMaxShift * rough.radius_px) {
         continue;
       }
-      SphereCandidate scored = score_candidate(ev, comps, best, min_peak, camera, band);
+      bool glass = false;
+      SphereCandidate scored = score_candidate(ev, comps, best, min_peak, camera, band, &glass);
+      // A glass ball's outline: see kGlassOutlineBand.
+      if (glass) {
+        int inside = 0;
+        const std::vector<Eigen::Vector2d> e =
+            ray_edges(comps[0].smooth, best.centre_px, kGlassOutlineGrow * best.radius_px, &inside,
+                      kGlassOutlineBand);
+        double rim = 0.0;
+        Circle grown = best;
+        grown.radius_px *= kGlassOutlineGrow;
+        const Circle outer = inside >= 90 ? consensus_circle(e, grown, &rim) : best;
+        if (rim >= 0.3 && outer.radius_px > best.radius_px &&
+            (outer.centre_px - best.centre_px).norm() < kGrownMaxShift * best.radius_px) {
+          SphereCandidate o =
+              score_candidate(ev, comps, outer, min_peak, camera, kGlassOutlineBand);
+          if (o.score >= scored.score) {
+            o.note += "; the outermost rim (in the stack's maximum)";
+            o.glass_outline = true;
+            scored = std::move(o);
+            best = outer;
+          }
+        }
+      }
       // A circle that reflects a light to below the plane is too small for the sphere: the
       // outline is looked for further out. A sphere shows circles concentric with its outline
       // inside it (the horizon mirrored at 0.7 of the radius, the base or cup mirrored near

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -183,6 +184,36 @@ constexpr double kShiftUndoPx = 0.2;
 // exposure_gains); the median is scaled by it in linear light before it is subtracted.
 std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d& c, double r,
                                double min_peak, double gain = 1.0);
+
+// The glass rules below hold only on spheres of at least this radius (photo pixels): on 42 px
+// marbles the reflections and the glow are both a few dozen analysis pixels, and told apart by size
+// the zenith light's reflection was refused and one marble's lights came out 31 degrees off on
+// average.
+inline constexpr double kGlowRuleMinRadiusPx = 88.0;
+// A glass ball's reflections of one light source are one size, its refracted hot spot's glow
+// varies with the light and is broader: a spot kGlowAreaRatio times the reflections' size
+// (their analysis pixels above half the spot's lift) is glow, and so is an unclipped spot
+// where the reflections clip; a clipped spot kFragmentAreaRatio times smaller is a piece of a
+// flare's spoke or of the glow's edge. The reflections' size is the clipped spots' most common
+// one: the area a with the most images holding a clipped spot within kReflectionAreaSpread of
+// it (at least kReflectionAreaImages of them; else none is known and no spot is refused). On
+// a 180 px glass ball: reflections 250-541 analysis pixels, clipped glow 1896-14070, unclipped
+// glow 324-1281, clipped spoke pieces of 1-5 pixels at the limb. The glow's clipped core, the
+// one the highlight was located on, was 196 pixels against the reflections' 37-85 (under
+// kGlareCoreRatio) and gave a light 89 degrees off.
+inline constexpr double kGlowAreaRatio = 3.0;
+inline constexpr double kFragmentAreaRatio = 8.0;
+inline constexpr double kReflectionAreaSpread = 1.5;
+inline constexpr int kReflectionAreaImages = 3;
+
+std::optional<double> reflection_spot_area(const std::vector<std::vector<Spot>>& spots_of);
+// Whether `sp`, on glass whose reflections are `reflection_area` analysis pixels, is glow or a
+// fragment (above), not the light's reflection.
+bool not_a_reflection(const Spot& sp, double reflection_area);
+
+// Images whose two brightest spots (the second of at least half the first's lift) lie across
+// the disc's centre from each other: a glass ball's reflection and refracted hot spot.
+int across_spot_images(const std::vector<std::vector<Spot>>& spots_of, const Eigen::Vector2d& c);
 
 // A sample in linear light: decoded where the samples are sRGB-encoded (clamped to 0..1).
 inline double to_linear(double v, bool srgb) {

@@ -459,4 +459,48 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
   return gains;
 }
 
+std::optional<double> reflection_spot_area(const std::vector<std::vector<Spot>>& spots_of) {
+  std::vector<double> areas;
+  for (const std::vector<Spot>& spots : spots_of) {
+    for (const Spot& sp : spots) {
+      if (sp.peak >= kSpotClip) areas.push_back(sp.area);
+    }
+  }
+  std::sort(areas.begin(), areas.end());
+  int best_images = 0;
+  double best_area = 0.0;
+  for (double a : areas) {
+    int images = 0;
+    for (const std::vector<Spot>& spots : spots_of) {
+      images += std::any_of(spots.begin(), spots.end(),
+                            [&](const Spot& sp) {
+                              return sp.peak >= kSpotClip && sp.area <= kReflectionAreaSpread * a &&
+                                     sp.area * kReflectionAreaSpread >= a;
+                            })
+                    ? 1
+                    : 0;
+    }
+    if (images > best_images) {
+      best_images = images;
+      best_area = a;
+    }
+  }
+  if (best_images < kReflectionAreaImages) return std::nullopt;
+  return best_area;
+}
+
+bool not_a_reflection(const Spot& sp, double reflection_area) {
+  return sp.peak < kSpotClip || sp.area > kGlowAreaRatio * reflection_area ||
+         sp.area * kFragmentAreaRatio < reflection_area;
+}
+
+int across_spot_images(const std::vector<std::vector<Spot>>& spots_of, const Eigen::Vector2d& c) {
+  int across = 0;
+  for (const std::vector<Spot>& spots : spots_of) {
+    if (spots.size() < 2 || spots[1].lift < 0.5 * spots[0].lift) continue;
+    if ((spots[0].centre_small - c).dot(spots[1].centre_small - c) < 0.0) ++across;
+  }
+  return across;
+}
+
 }  // namespace ptmkit::calib::stack_detail

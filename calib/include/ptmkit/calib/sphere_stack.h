@@ -23,7 +23,9 @@
 //           of one circle; a coin, dish or lens glints at the same few places or lights up
 //           as a whole, so its track is short
 //   geometry  1 - 2 x the share of those spots (the ones bright enough to be a light's
-//           reflection) that the circle reflects to below the sample plane, at least 0: a
+//           reflection, and clipped where three quarters of the track's bright spots are: an
+//           unclipped one beside clipped reflections is a glass ball's refracted glow) that
+//           the circle reflects to below the sample plane, at least 0: a
 //           sphere on the plane reflects every light from above it, and a circle inside the
 //           outline (the horizon mirrored in a chrome ball in a lit room, at 0.7 of its
 //           radius) puts the low lights below it
@@ -58,7 +60,13 @@
 // (StackCalibration::two_spot_images); with two or more spheres the spot whose direction agrees
 // with the other spheres' is taken (a refracted spot does not obey mirror geometry;
 // SphereLight::spot_rank says which), with one sphere the brightest unless it proves unusable on
-// a glass sphere (SphereMaterial).
+// a glass sphere (SphereMaterial). On a glass sphere of at least 88 px radius, a spot over three
+// times the size of its reflections (the most common size of its clipped spots, from at least
+// three images) or unclipped where they clip is the hot spot's glow, and one under an eighth of
+// it a piece of flare: neither is ever taken, and an image left with neither is flagged, its
+// reflection hidden. Such spots count for no candidate's geometry either, and a glass-like
+// candidate of that size takes the outermost rim the stack's maximum shows within 9% outside
+// it (SphereCandidate::glass_outline).
 #pragma once
 
 #include <filesystem>
@@ -143,6 +151,11 @@ struct SphereCandidate {
   int below_plane_spots = 0;
   double geometry = 1.0;  // 0..1
   bool chosen = false;
+  // Glass-like (a quarter of the images show a second comparable spot across the centre) and
+  // its circle taken from the outermost rim, in the stack's maximum: the full-resolution rim
+  // is then not looked for more than 1% inside it (a glass ball's median shows the room's
+  // refracted images ending inside the limb).
+  bool glass_outline = false;
   std::string note;  // why refused, or where it came from
   // Per image, the brightest moving spot inside (photo pixels), if compact.
   std::vector<std::optional<Eigen::Vector2d>> spots_px;
