@@ -1405,8 +1405,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
   // geometry; the reflections on every sphere agree on one distant light.
   // Sphere k shows two comparable spots in image ii.
   auto two_spots = [&](std::size_t k, std::size_t ii) {
-    const std::vector<Spot>& spots = spots_of[k][ii];
-    return spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift;
+    return two_comparable_spots(spots_of[k][ii]);
   };
   std::vector<std::vector<int>> rank(k_spheres, std::vector<int>(static_cast<std::size_t>(ev.n)));
   // Per image: the choice agrees across spheres better than every other by the margin.
@@ -1496,16 +1495,13 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
       const auto ii = static_cast<std::size_t>(i);
       if (!two_spots(k, ii)) continue;
       two = true;
-      const Eigen::Vector2d c = small_px(circles[k].centre_px, s);
-      const Eigen::Vector2d a = spots_of[k][ii][0].centre_small - c;
-      const Eigen::Vector2d b = spots_of[k][ii][1].centre_small - c;
-      if (a.dot(b) < 0.0) opposite = true;
+      if (spots_across(spots_of[k][ii], small_px(circles[k].centre_px, s))) opposite = true;
     }
     out.two_spot_images += two ? 1 : 0;
     across += opposite ? 1 : 0;
   }
   if (options.material == SphereMaterial::kAuto) {
-    const bool glass = across >= kGlassTwoSpotShare * ev.n && across > 0;
+    const bool glass = glass_from_spots(across, ev.n);
     out.material = glass ? SphereMaterial::kGlass : SphereMaterial::kMirror;
     out.material_note = "decided from the stack: " + std::to_string(across) + " of " +
                         std::to_string(ev.n) +

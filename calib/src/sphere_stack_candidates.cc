@@ -344,7 +344,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   // Glass-like: a quarter of the images show two comparable spots across the centre. On a
   // large one the glow, told by size against its reflections, is no light's reflection.
   const int across = across_spot_images(spots_of, c.centre_px);
-  const bool glass = across > 0 && across >= kGlassTwoSpotShare * ev.n;
+  const bool glass = glass_from_spots(across, ev.n);
   const bool large = c.radius_px * ev.scale >= kGlowRuleMinRadiusPx;
   if (glass_like != nullptr) *glass_like = glass && large;
   // 0: unknown (not glass, small, or no common reflection size).

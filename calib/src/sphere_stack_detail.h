@@ -211,9 +211,22 @@ std::optional<double> reflection_spot_area(const std::vector<std::vector<Spot>>&
 // fragment (above), not the light's reflection.
 bool not_a_reflection(const Spot& sp, double reflection_area);
 
-// Images whose two brightest spots (the second of at least half the first's lift) lie across
-// the disc's centre from each other: a glass ball's reflection and refracted hot spot.
+// A second spot of at least half the first's lift (spots brightest first).
+inline bool two_comparable_spots(const std::vector<Spot>& spots) {
+  return spots.size() >= 2 && spots[1].lift >= 0.5 * spots[0].lift;
+}
+// Two comparable spots across the disc's centre `c` from each other: a glass ball's reflection
+// and refracted hot spot.
+inline bool spots_across(const std::vector<Spot>& spots, const Eigen::Vector2d& c) {
+  return two_comparable_spots(spots) &&
+         (spots[0].centre_small - c).dot(spots[1].centre_small - c) < 0.0;
+}
+// Images whose spots lie across the centre (spots_across).
 int across_spot_images(const std::vector<std::vector<Spot>>& spots_of, const Eigen::Vector2d& c);
+// Glass, judged from `across` of `n` images with spots across the centre (kGlassTwoSpotShare).
+inline bool glass_from_spots(int across, int n) {
+  return across > 0 && across >= kGlassTwoSpotShare * n;
+}
 
 // A sample in linear light: decoded where the samples are sRGB-encoded (clamped to 0..1).
 inline double to_linear(double v, bool srgb) {

@@ -496,10 +496,7 @@ bool not_a_reflection(const Spot& sp, double reflection_area) {
 
 int across_spot_images(const std::vector<std::vector<Spot>>& spots_of, const Eigen::Vector2d& c) {
   int across = 0;
-  for (const std::vector<Spot>& spots : spots_of) {
-    if (spots.size() < 2 || spots[1].lift < 0.5 * spots[0].lift) continue;
-    if ((spots[0].centre_small - c).dot(spots[1].centre_small - c) < 0.0) ++across;
-  }
+  for (const std::vector<Spot>& spots : spots_of) across += spots_across(spots, c) ? 1 : 0;
   return across;
 }
 
