@@ -5,7 +5,8 @@
 // render's truth: each circle's centre and radius, each highlight against the mirror
 // highlight of its light, and each combined light direction.
 //
-//   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres-material M]
+//   photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres N]
+//                     [--spheres-material M]
 //                     [--environment dark|lit] [--noise SIGMA] [--exposure X]
 //                     [--exposure-jitter EV] [--shake PX] [--per-light]
 //                     [PRESET[:SEED,...] ...]
@@ -15,6 +16,8 @@
 //       --lights: the light layout instead of the preset's, as `ptmkit synth --lights SPEC`
 //       (e.g. rings:15:3,40:3,65:2,80:4)
 //       --no-bases: the spheres lying on the ground, as `ptmkit synth --no-bases`
+//       --spheres N: only the first N of the preset's spheres, as `ptmkit synth --spheres N`
+//       (and calibrated with --spheres N)
 //       --spheres-material M: every sphere of M (black-glossy, chrome, glass), as `ptmkit synth`
 //       --environment E: the room the spheres mirror, dark (the presets') or lit, as `ptmkit
 //       synth --environment E`
@@ -58,9 +61,12 @@ double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 void run(const fs::path& work, const std::string& preset, unsigned seed, int width, int height,
          const std::string& light_layout, bool bases, const std::string& material,
          const std::string& environment, double noise, double exposure, double jitter_ev,
-         double shake_px, bool per_light) {
+         double shake_px, bool per_light, int spheres) {
   synth::PhotoOptions po = synth::photo_preset_options(preset);
   po.seed = seed;
+  if (spheres > 0 && static_cast<std::size_t>(spheres) < po.spheres.size()) {
+    po.spheres.resize(static_cast<std::size_t>(spheres));
+  }
   if (!bases) po.sphere_bases = false;
   if (!material.empty()) {
     for (synth::PhotoSphere& s : po.spheres) s.material = synth::parse_sphere_material(material);
@@ -106,10 +112,9 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
       worst = std::max(worst, d);
       ++n;
     }
-    std::printf(" sphere %zu centre %.3f px radius %.3f%% highlights mean %.3f max %.3f px;", k,
+    std::printf(" sphere %zu centre %.3f px radius %+.3f%% highlights mean %.3f max %.3f px;", k,
                 (c.centre_px - t.centre_px).norm(),
-                100.0 * std::abs(c.radius_px - t.radius_px) / t.radius_px, n ? sum / n : 0.0,
-                worst);
+                100.0 * (c.radius_px - t.radius_px) / t.radius_px, n ? sum / n : 0.0, worst);
   }
   double mean = 0.0, max = 0.0;
   int used = 0;
@@ -120,8 +125,9 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
     max = std::max(max, a);
     ++used;
   }
-  std::printf(" lights %d of %zu, mean %.3f max %.3f deg; %.2f s\n", used, truth.light_dirs.size(),
-              used ? mean / used : 0.0, max, seconds);
+  std::printf(" lights %d of %zu, mean %.3f max %.3f deg;%s %.2f s\n", used,
+              truth.light_dirs.size(), used ? mean / used : 0.0, max,
+              r.search_note.empty() ? "" : " second search;", seconds);
   // The camera's measured shifts against the render's, both taken about their own mean (the
   // stack's median, which the shifts are measured against, sits near the images' mean place).
   if (!r.image_shifts_px.empty() && r.image_shifts_px.size() == truth.light_dirs.size()) {
@@ -159,7 +165,7 @@ void run(const fs::path& work, const std::string& preset, unsigned seed, int wid
 }  // namespace
 
 constexpr const char* kUsage =
-    "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] "
+    "usage: photo_calibration WORK_DIR [--size WxH] [--lights SPEC] [--no-bases] [--spheres N] "
     "[--spheres-material M] [--environment dark|lit] [--noise SIGMA] [--exposure X] "
     "[--exposure-jitter EV] [--shake PX] [--per-light] [PRESET[:SEED,...] ...]\n";
 
@@ -182,11 +188,12 @@ int main(int argc, char** argv) {
     bool per_light = false;
     std::string material, environment;
     double noise = -1.0, exposure = 0.0, jitter_ev = 0.0, shake_px = 0.0;
+    int spheres = 0;
     while (!specs.empty() &&
            (specs[0] == "--size" || specs[0] == "--lights" || specs[0] == "--no-bases" ||
             specs[0] == "--spheres-material" || specs[0] == "--environment" ||
             specs[0] == "--noise" || specs[0] == "--exposure" || specs[0] == "--exposure-jitter" ||
-            specs[0] == "--shake" || specs[0] == "--per-light")) {
+            specs[0] == "--shake" || specs[0] == "--per-light" || specs[0] == "--spheres")) {
       if (specs[0] == "--no-bases" || specs[0] == "--per-light") {
         if (specs[0] == "--no-bases") {
           bases = false;
@@ -202,6 +209,14 @@ int main(int argc, char** argv) {
       }
       if (specs[0] == "--lights") {
         lights = specs[1];
+      } else if (specs[0] == "--spheres") {
+        char* end = nullptr;
+        const long v = std::strtol(specs[1].c_str(), &end, 10);
+        if (end == specs[1].c_str() || *end != '\0' || v < 1 || v > 8) {
+          std::fprintf(stderr, "photo_calibration: --spheres needs a count of 1 to 8\n");
+          return 2;
+        }
+        spheres = static_cast<int>(v);
       } else if (specs[0] == "--spheres-material") {
         material = specs[1];
       } else if (specs[0] == "--environment") {
@@ -250,7 +265,7 @@ int main(int argc, char** argv) {
       for (const unsigned s : seeds) {
         try {
           run(work, preset, s, width, height, lights, bases, material, environment, noise, exposure,
-              jitter_ev, shake_px, per_light);
+              jitter_ev, shake_px, per_light, spheres);
         } catch (const calib::SphereSearchError& e) {
           std::printf("%s seed %u: spheres not told apart: %s\n", preset.c_str(), s, e.what());
         }

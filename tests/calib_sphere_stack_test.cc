@@ -531,10 +531,11 @@ StackCalibration calibrate_photo(const PhotoImages& p, int spheres) {
   return calibrate_sphere_stack(p.images, p.names, o);
 }
 
-// Every sphere's circle within the targets, every light usable, and the lights' mean and worst
-// errors (degrees) within the bounds given.
+// Every sphere's circle within the targets (the radius within `radius_rel`), every light usable,
+// and the lights' mean and worst errors (degrees) within the bounds given.
 void expect_photo_rig(const StackCalibration& r, const PhotoImages& p, const char* label,
-                      double mean_max_deg, double worst_max_deg) {
+                      double mean_max_deg, double worst_max_deg,
+                      double radius_rel = kRadiusTargetRel) {
   ASSERT_EQ(r.rig.spheres.size(), p.truth.spheres.size()) << label;
   for (std::size_t s = 0; s < r.rig.spheres.size(); ++s) {
     const Circle& c = r.rig.spheres[s].sphere;
@@ -544,7 +545,7 @@ void expect_photo_rig(const StackCalibration& r, const PhotoImages& p, const cha
     std::printf("%s, sphere %zu: centre off %.3f px, radius off %+.3f%%\n", label, s, off,
                 100.0 * rel);
     EXPECT_LE(off, kCentreTargetPx) << label;
-    EXPECT_LE(std::abs(rel), kRadiusTargetRel) << label;
+    EXPECT_LE(std::abs(rel), radius_rel) << label;
   }
   ASSERT_EQ(r.rig.lights.size(), p.truth.light_dirs.size()) << label;
   double sum = 0.0, worst = 0.0;
@@ -748,18 +749,44 @@ TEST(CalibSphereStack, BlackBallsLyingOnTheClothAreNotFoundLarge) {
   expect_photo_rig(r, p, "black balls on the cloth", kLightMeanTargetDeg, kLightMaxTargetDeg);
 }
 
-// Chrome balls in a lit room on bases wider than themselves (photo-chrome seed 1, 22 lights):
-// seen from above, each base's outer rim is a sharp ring about 1.17 radii round its ball,
-// shifted toward the image centre, while the ball's own outline shows only where it lies
-// against the base's lit top. The first search refines proposals near the outlines onto the
-// rims, and the two rims' highlights disagree about every light; the second search, made only
-// then, keeps the outlines and chooses them by how closely their lights agree.
-TEST(CalibSphereStack, SpheresWhoseFirstChoiceDisagreesAreFoundByTheSecondSearch) {
+// One chrome ball in a lit room (photo-chrome with its first sphere only, 22 lights), as most
+// captures hold it, found without hints or a second sphere to agree with:
+// - on its cup, wider than the ball: seen from above, the cup's rim is a sharp ring 1.17 radii
+//   round the ball, while the ball's limb mirrors the dark cloth it shades and shows on few
+//   rays of the median. Refined onto the rim, every proposal near the ball became the cup, and
+//   its lights were written 16 degrees off on average. The ball's mirror stays still under
+//   every light where the cup and the cloth follow it; the still disc in the stack's spread
+//   proposes the outline, refined close to it.
+// - seed 2: the highlight's bloom over the mirror's dark limb outweighed, in encoded values, its
+//   clipped core on the bright room mirrored beside it, and put the spot that scores the circle
+//   5 px toward the limb: one light below the sample plane, and a circle 35% too large scored
+//   above the ball's. A spot is centred on the light it adds, in linear light.
+// - lying on the cloth, no cup: the limb was not proposed at all; a circle 3 px off and 7% small
+//   was taken.
+// Measured: on the cup circles 0.04-0.08 px off and 0.37-0.38% small (the mirror's last
+// fraction of a pixel shows the cup beside it), lights 0.31-0.34 degrees off on average, over
+// the 0.2 target; on the cloth 0.18 px and 0.27% large, lights 0.48 on average, 1.03 at worst.
+TEST(CalibSphereStack, OneChromeBallInALitRoomIsNotTakenForItsCup) {
   PTMKIT_RELEASE_BUILD_ONLY();
-  const PhotoImages p = render_lit_chrome(1);
-  const StackCalibration r = calibrate_photo(p, 2);
-  EXPECT_NE(r.search_note.find("second search"), std::string::npos) << r.search_note;
-  expect_photo_rig(r, p, "lit chrome, second search", 0.5, 1.5);
+  struct Case {
+    std::uint64_t seed;
+    bool bases;
+    double radius_rel;
+    double worst_deg;
+  };
+  for (const Case& k :
+       {Case{1, true, kRadiusTargetRel, kLightMaxTargetDeg},
+        Case{2, true, kRadiusTargetRel, kLightMaxTargetDeg}, Case{1, false, 0.01, 1.5}}) {
+    PhotoImages p;
+    p.options = lit_chrome_options(k.seed);
+    p.options.spheres.resize(1);
+    p.options.sphere_bases = k.bases;
+    render_all(&p, "one");
+    const StackCalibration r = calibrate_photo(p, 1);
+    const std::string label = "one lit chrome ball, seed " + std::to_string(k.seed) +
+                              (k.bases ? " on its cup" : " on the cloth");
+    expect_photo_rig(r, p, label.c_str(), 0.5, k.worst_deg, k.radius_rel);
+  }
 }
 
 // Glass marbles in a lit room: the limb mirrors the floor beside the marble, which the marble
@@ -847,6 +874,29 @@ std::vector<fs::path> render_photo_files(const synth::PhotoOptions& po, const fs
     }
   }
   return photos;
+}
+
+// Chrome balls in a lit room on bases wider than themselves (photo-chrome seed 1, 22 lights),
+// at a high gain (read noise of 6 grey levels), from its JPEG files: seen from above, each
+// base's outer rim is a sharp ring about 1.17 radii round its ball, shifted toward the image
+// centre, while the ball's own outline shows only where it lies against the base's lit top,
+// and the noise on its dark limb hides the still disc that proposes the outline at the
+// presets' noise. The first search refines proposals near the outlines onto the rims, and the
+// two rims' highlights disagree about every light; the second search, made only then, keeps
+// the outlines and chooses them by how closely their lights agree.
+TEST(CalibSphereStack, SpheresWhoseFirstChoiceDisagreesAreFoundByTheSecondSearch) {
+  PTMKIT_RELEASE_BUILD_ONLY();
+  test::ScratchDir dir;
+  PhotoImages p;
+  p.options = lit_chrome_options(1);
+  p.options.artefacts.read_noise_grey = 6.0;
+  p.truth = synth::PhotoRenderer(p.options).truth();
+  StackCalibrationOptions o;
+  o.rig.sphere_count = 2;
+  o.rig.detection.camera.focal_px = p.options.focal_px;
+  const StackCalibration r = calibrate_sphere_stack(render_photo_files(p.options, dir.path()), o);
+  EXPECT_NE(r.search_note.find("second search"), std::string::npos) << r.search_note;
+  expect_photo_rig(r, p, "lit chrome, read noise 6, second search", 0.5, 1.5);
 }
 
 struct LargeSphereRun {

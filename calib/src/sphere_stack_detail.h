@@ -132,6 +132,13 @@ struct Evidence {
   // lights (a glass ball's refracted hot spot under lights near the camera's axis, spread over
   // its limb) rises above it only where it glows in more than three quarters of the images.
   cv::Mat small_lower_quartile;
+  // Per pixel, how much it changes from light to light: the spread between the upper and the
+  // lower quartile over the images against their sum, in linear light (analysis size; of the
+  // block maxima at scale > 1). A mirror shows the room as it is under every light and changes
+  // only where a highlight or its flare passes; a matte surface (the cloth, a sphere's base or
+  // cup) follows every light. In a lit room a chrome ball's limb mirrors the dark cloth it
+  // shades and barely shows in the median, while here the still disc ends at it.
+  cv::Mat small_spread;
   cv::Mat reference;  // CV_32F photo size, or empty
   bool srgb = true;   // the samples are sRGB-encoded (else linear)
   [[nodiscard]] float at(int i, int x, int y) const {
@@ -153,7 +160,7 @@ cv::Mat stretch(const cv::Mat& f, int type, bool logarithm = true);
 // ---- Moving spots (sphere_stack_evidence.cc). -------------------------------------------------
 
 struct Spot {
-  Eigen::Vector2d centre_small;  // analysis pixels, weighted by brightness above the median
+  Eigen::Vector2d centre_small;  // analysis pixels, weighted by the light added (linear)
   double peak = 0.0;             // image luma at the spot's brightest pixel
   double lift = 0.0;             // brightest (image - median)
   double lift_linear = 0.0;      // the same in linear light

@@ -17,6 +17,9 @@ namespace {
 
 // The share of the median's pixels, its steepest edges, that the shifts are measured on.
 constexpr double kShiftEdgeShare = 0.02;
+// Evidence::small_spread's floor in linear light (about 25 grey levels of sRGB): below it the
+// sensor's noise and the JPEG's would pass for change.
+constexpr double kSpreadFloor = 0.01;
 constexpr int kShiftIterations = 10;
 
 struct CameraShifts {
@@ -173,17 +176,27 @@ Evidence gather(const Source& src, int max_side) {
   ev.small_max = cv::Mat(ev.sh, ev.sw, CV_32F);
   ev.small_median = cv::Mat(ev.sh, ev.sw, CV_32F);
   ev.small_lower_quartile = cv::Mat(ev.sh, ev.sw, CV_32F);
+  ev.small_spread = cv::Mat(ev.sh, ev.sw, CV_32F);
   tbb::parallel_for(0, ev.sh, [&](int y) {
     std::vector<float> v(static_cast<std::size_t>(ev.n));
+    // After the median's partition the quartiles lie in its halves.
+    const std::ptrdiff_t mid = ev.n / 2, q1 = ev.n / 4, q3 = 3 * (ev.n - 1) / 4;
     for (int x = 0; x < ev.sw; ++x) {
       for (int i = 0; i < ev.n; ++i) v[static_cast<std::size_t>(i)] = ev.at(i, x, y);
       ev.small_max.at<float>(y, x) = *std::max_element(v.begin(), v.end());
-      std::nth_element(v.begin(), v.begin() + ev.n / 2, v.end());
-      ev.small_median.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 2)];
-      if (ev.scale == 1) {
-        std::nth_element(v.begin(), v.begin() + ev.n / 4, v.begin() + ev.n / 2);
-        ev.small_lower_quartile.at<float>(y, x) = v[static_cast<std::size_t>(ev.n / 4)];
+      std::nth_element(v.begin(), v.begin() + mid, v.end());
+      ev.small_median.at<float>(y, x) = v[static_cast<std::size_t>(mid)];
+      if (q3 > mid) {
+        std::nth_element(v.begin() + mid + 1, v.begin() + q3, v.end());
+      } else if (q3 < mid) {
+        std::nth_element(v.begin(), v.begin() + q3, v.begin() + mid);
       }
+      const double hi = to_linear(v[static_cast<std::size_t>(q3)], ev.srgb);
+      if (q1 < mid) std::nth_element(v.begin(), v.begin() + q1, v.begin() + mid);
+      const float lower = v[static_cast<std::size_t>(q1)];
+      const double lo = to_linear(lower, ev.srgb);
+      ev.small_spread.at<float>(y, x) = static_cast<float>((hi - lo) / (hi + lo + kSpreadFloor));
+      if (ev.scale == 1) ev.small_lower_quartile.at<float>(y, x) = lower;
     }
   });
   CameraShifts cs = camera_shifts(ev);
@@ -328,14 +341,18 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
       if (l == 0) continue;
       Spot& s = spots[static_cast<std::size_t>(l - 1)];
       const double d = lift.at<float>(y, x);
-      const double wgt = d - thr + 1e-6;
-      sw[static_cast<std::size_t>(l - 1)] += wgt;
-      sx[static_cast<std::size_t>(l - 1)] += wgt * (x + x0);
-      sy[static_cast<std::size_t>(l - 1)] += wgt * (y + y0);
       s.lift = std::max(s.lift, d);
       const double v = ev.at(i, x + x0, y + y0);
       const double m = scaled_median(ev.small_median_max3.at<float>(y + y0, x + x0), gain, ev.srgb);
-      s.lift_linear = std::max(s.lift_linear, to_linear(v, ev.srgb) - to_linear(m, ev.srgb));
+      const double d_linear = to_linear(v, ev.srgb) - to_linear(m, ev.srgb);
+      s.lift_linear = std::max(s.lift_linear, d_linear);
+      // Weighted by the light added, in linear light: the encoded lift is largest where the
+      // room is dark, and a highlight's bloom over a mirror's dark limb outweighed its clipped
+      // core on the bright room mirrored beside it (5 px toward the limb on a 42 px ball).
+      const double wgt = std::max(d_linear, 0.0) + 1e-6;
+      sw[static_cast<std::size_t>(l - 1)] += wgt;
+      sx[static_cast<std::size_t>(l - 1)] += wgt * (x + x0);
+      sy[static_cast<std::size_t>(l - 1)] += wgt * (y + y0);
       s.peak = std::max(s.peak, static_cast<double>(ev.at(i, x + x0, y + y0)));
     }
   }
