@@ -314,12 +314,11 @@ BloomSize bloom_size(const std::vector<std::vector<Spot>>& spots_of, double disc
 
 // `rim_band`: the rim is the share of rays whose strongest edge within this share of the
 // radius lies on the circle (the band the circle was refined in: a grown outline keeps its
-// own support beside the sharper circle inside it that it grew from). `glass_like`: a large
-// glass ball's (kGlowRuleMinRadiusPx); `spots_across`: glass of any size (glass_from_spots).
+// own support beside the sharper circle inside it that it grew from). `glass_spots`: whether
+// the spots judge it glass (glass_from_spots), at any size.
 SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>& comps,
                                 const Circle& c, double min_peak, const SphereCamera& camera,
-                                double rim_band, bool* glass_like = nullptr,
-                                bool* spots_across = nullptr) {
+                                double rim_band, bool* glass_spots = nullptr) {
   SphereCandidate out;
   out.circle = c;
   for (const Composite& comp : comps) {
@@ -355,8 +354,7 @@ SphereCandidate score_candidate(const Evidence& ev, const std::vector<Composite>
   const int across = across_spot_images(spots_of, c.centre_px);
   const bool glass = glass_from_spots(across, ev.n);
   const bool large = c.radius_px * ev.scale >= kGlowRuleMinRadiusPx;
-  if (glass_like != nullptr) *glass_like = glass && large;
-  if (spots_across != nullptr) *spots_across = glass;
+  if (glass_spots != nullptr) *glass_spots = glass;
   // 0: unknown (not glass, small, or no common reflection size).
   const double reflection_area =
       glass && large ? reflection_spot_area(spots_of).value_or(0.0) : 0.0;
@@ -606,11 +604,10 @@ std::vector<SphereCandidate> find_candidates(const Evidence& ev, const SphereSea
           (best.centre_px - rough.centre_px).norm() > kGrownMaxShift * rough.radius_px) {
         continue;
       }
-      bool glass = false, across = false;
-      SphereCandidate scored =
-          score_candidate(ev, comps, best, min_peak, camera, band, &glass, &across);
-      // A glass ball's outline: see kGlassOutlineBand.
-      if (glass) {
+      bool across = false;
+      SphereCandidate scored = score_candidate(ev, comps, best, min_peak, camera, band, &across);
+      // A large glass ball's outline: see kGlassOutlineBand.
+      if (across && best.radius_px * ev.scale >= kGlowRuleMinRadiusPx) {
         int inside = 0;
         const std::vector<Eigen::Vector2d> e =
             ray_edges(comps[0].smooth, best.centre_px, kGlassOutlineGrow * best.radius_px, &inside,

@@ -353,7 +353,7 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
       sw[static_cast<std::size_t>(l - 1)] += wgt;
       sx[static_cast<std::size_t>(l - 1)] += wgt * (x + x0);
       sy[static_cast<std::size_t>(l - 1)] += wgt * (y + y0);
-      s.peak = std::max(s.peak, static_cast<double>(ev.at(i, x + x0, y + y0)));
+      s.peak = std::max(s.peak, v);
     }
   }
   for (int l = 1; l < k; ++l) {
