@@ -208,12 +208,6 @@ Eigen::Vector2d symmetric_centre(const cv::Mat& lift, const Eigen::Vector2d& sta
 // pixels are refined by symmetric_centre.
 constexpr int kSmallCorePixels = 20;
 
-// The exposure varies from image to image where the median over the images of |ln gain|
-// exceeds this (3%): steady renders' gains scatter by at most 2.3% about 1 (the light's own
-// glow over what the spheres mirror, JPEG; 47 renders of the four presets, dark and lit).
-// Smaller variations change the highlights by less than the steady scatter does.
-constexpr double kExposureVaries = 0.03;
-
 // A larger clipped core's edge and its halo's symmetry disagreeing by more than this (pixels):
 // the background has moved the edge, and the halo's centre is taken. With the edge on the
 // level set of the light's lift (level_centre) the background moves it less, and 0.4 rather
@@ -1356,9 +1350,7 @@ StackCalibration run(const Source& src, const std::vector<fs::path>& names,
     gains = exposure_gains(ev, cs, rs);
     // A steady capture's gains scatter a little about 1: below kExposureVaries the exposure
     // is taken as steady and the median left as it is.
-    std::vector<double> off;
-    for (double g : gains) off.push_back(std::abs(std::log(g)));
-    if (off.empty() || upper_median(off) <= kExposureVaries) {
+    if (!exposure_varies(gains)) {
       std::fill(gains.begin(), gains.end(), 1.0);
     } else {
       out.exposure_gains = gains;

@@ -141,6 +141,12 @@ struct Evidence {
   cv::Mat small_spread;
   cv::Mat reference;  // CV_32F photo size, or empty
   bool srgb = true;   // the samples are sRGB-encoded (else linear)
+  // Each analysis sample's value in linear light (to_linear), by its 16-bit code.
+  std::vector<double> linear_of_code;
+  [[nodiscard]] double linear_at(int i, int x, int y) const {
+    return linear_of_code[small[static_cast<std::size_t>(i)]
+                               [static_cast<std::size_t>(y) * sw + static_cast<std::size_t>(x)]];
+  }
   [[nodiscard]] float at(int i, int x, int y) const {
     return static_cast<float>(small[static_cast<std::size_t>(i)][static_cast<std::size_t>(y) * sw +
                                                                  static_cast<std::size_t>(x)]) /
@@ -250,13 +256,35 @@ inline float scaled_median(float m, double gain, bool srgb) {
 
 // Each image's exposure against the stack's, from what the spheres mirror of the room: the
 // median, over the pixels of the discs (analysis pixels: centres `c`, radii `r`) that the
-// stack's median shows bright but unclipped, of the image's value over the median's, in
-// linear light. The room's lamps and windows and whatever they light stay as they are from
-// light to light, so an image that shows them brighter or darker was exposed so (a camera
-// on automatic exposure, a flash whose output varies). 1 for an image without enough such
-// pixels (a dark room that mirrors nothing bright).
+// stack's median shows bright but unclipped and that follow one gain per image, of the image's
+// value over the median's, in linear light (the lower quartile for an image whose light lifts
+// many of them, where the exposure varies). The room's lamps and windows and whatever they
+// light stay as they are from light to light, so an image that shows them brighter or darker
+// was exposed so (a camera on automatic exposure, a flash whose output varies). 1 for every
+// image without enough such pixels (a dark room that mirrors nothing bright), and for an image
+// where most of them clip.
 std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::Vector2d>& c,
                                    const std::vector<double>& r);
+
+// The exposure varies from image to image where the median over the images of |ln gain|
+// exceeds this (3%): steady renders' gains scatter by at most 2.3% about 1 (the light's own
+// glow over what the spheres mirror, JPEG; 47 renders of the four presets, dark and lit).
+// Smaller variations change the highlights by less than the steady scatter does.
+inline constexpr double kExposureVaries = 0.03;
+bool exposure_varies(const std::vector<double>& gains);
+// exposure_gains over one disc (analysis pixels), where they vary and taking them out leaves
+// the disc stiller: the lower quartile over the disc of its spread (Evidence::small_spread, the
+// stillest quarter: what it mirrors of the room) at most kGainsStillerShare of the stack's;
+// else all 1. A steady capture's gains measured over a disc that mirrors what the lights change
+// (the lit cloth, the relief) vary too, by up to a factor 6, and leave a ball's disc no stiller
+// (photo-dome in a lit room, seed 4: 0.96); a chrome ball's with the exposure varying by up to
+// 1 EV came to 0.39-0.45.
+inline constexpr double kGainsStillerShare = 0.7;
+std::vector<double> disc_gains(const Evidence& ev, const Eigen::Vector2d& c, double r);
+// Evidence::small_spread over `box` (analysis pixels) with each image's value divided by its
+// gain (exposure_gains) first: under an exposure that varies a still mirror varies with it,
+// and only with the gains taken out is it still again.
+cv::Mat spread_in_box(const Evidence& ev, const cv::Rect& box, const std::vector<double>& gains);
 
 // ---- Candidates (sphere_stack_candidates.cc). -------------------------------------------------
 

@@ -20,6 +20,24 @@ constexpr double kShiftEdgeShare = 0.02;
 // Evidence::small_spread's floor in linear light (about 25 grey levels of sRGB): below it the
 // sensor's noise and the JPEG's would pass for change.
 constexpr double kSpreadFloor = 0.01;
+// The quartiles of Evidence::small_spread among n sorted values.
+std::ptrdiff_t spread_low(int n) { return n / 4; }
+std::ptrdiff_t spread_high(int n) { return 3 * (n - 1) / 4; }
+double spread_of(double hi, double lo) { return (hi - lo) / (hi + lo + kSpreadFloor); }
+
+// The spread of one analysis pixel over the images with each image's value divided by its gain
+// (`v`: scratch of ev.n values).
+double spread_without_gains(const Evidence& ev, int x, int y, const std::vector<double>& gains,
+                            std::vector<double>* v) {
+  const std::ptrdiff_t q1 = spread_low(ev.n), q3 = spread_high(ev.n);
+  for (int i = 0; i < ev.n; ++i) {
+    (*v)[static_cast<std::size_t>(i)] = ev.linear_at(i, x, y) / gains[static_cast<std::size_t>(i)];
+  }
+  std::nth_element(v->begin(), v->begin() + q3, v->end());
+  const double hi = (*v)[static_cast<std::size_t>(q3)];
+  std::nth_element(v->begin(), v->begin() + q1, v->begin() + q3);
+  return spread_of(hi, (*v)[static_cast<std::size_t>(q1)]);
+}
 constexpr int kShiftIterations = 10;
 
 struct CameraShifts {
@@ -173,6 +191,10 @@ Evidence gather(const Source& src, int max_side) {
       }
     });
   });
+  ev.linear_of_code.resize(65536);
+  for (std::size_t q = 0; q < ev.linear_of_code.size(); ++q) {
+    ev.linear_of_code[q] = to_linear(static_cast<float>(q) / 65535.0f, ev.srgb);
+  }
   ev.small_max = cv::Mat(ev.sh, ev.sw, CV_32F);
   ev.small_median = cv::Mat(ev.sh, ev.sw, CV_32F);
   ev.small_lower_quartile = cv::Mat(ev.sh, ev.sw, CV_32F);
@@ -180,7 +202,7 @@ Evidence gather(const Source& src, int max_side) {
   tbb::parallel_for(0, ev.sh, [&](int y) {
     std::vector<float> v(static_cast<std::size_t>(ev.n));
     // After the median's partition the quartiles lie in its halves.
-    const std::ptrdiff_t mid = ev.n / 2, q1 = ev.n / 4, q3 = 3 * (ev.n - 1) / 4;
+    const std::ptrdiff_t mid = ev.n / 2, q1 = spread_low(ev.n), q3 = spread_high(ev.n);
     for (int x = 0; x < ev.sw; ++x) {
       for (int i = 0; i < ev.n; ++i) v[static_cast<std::size_t>(i)] = ev.at(i, x, y);
       ev.small_max.at<float>(y, x) = *std::max_element(v.begin(), v.end());
@@ -195,7 +217,7 @@ Evidence gather(const Source& src, int max_side) {
       if (q1 < mid) std::nth_element(v.begin(), v.begin() + q1, v.begin() + mid);
       const float lower = v[static_cast<std::size_t>(q1)];
       const double lo = to_linear(lower, ev.srgb);
-      ev.small_spread.at<float>(y, x) = static_cast<float>((hi - lo) / (hi + lo + kSpreadFloor));
+      ev.small_spread.at<float>(y, x) = static_cast<float>(spread_of(hi, lo));
       if (ev.scale == 1) ev.small_lower_quartile.at<float>(y, x) = lower;
     }
   });
@@ -381,8 +403,23 @@ std::vector<Spot> moving_spots(const Evidence& ev, int i, const Eigen::Vector2d&
 // room and its noise, and unclipped in most images whatever their exposure.
 constexpr double kGainMinLinear = 0.1;
 constexpr double kGainMaxLinear = 0.8;
+// Where too few such pixels follow one gain per image, from this bright: a chrome ball in a lit
+// room mirrors the lamps and windows clipped and the room's walls darker (lit chrome at +-1 EV,
+// seeds 3 and 5: 14 and 0-4 such pixels from 0.1, 52 from this on seed 3). Not from the first:
+// in a dark room the lit cloth a black ball mirrors changes with each light coherently enough
+// to pass for the exposure.
+constexpr double kGainDimMinLinear = 0.02;
+// ... and there the exposure counts as varying only where the gains' median |ln gain| exceeds
+// this (10%): from 0.02 the mirrored cloth of a steady black ball in a dark room gave 5.7%
+// (photo-dome seed 2, gains 0.89-1.38); an exposure varying by up to 1 EV gives about 35%.
+constexpr double kDimExposureVaries = 0.1;
 // Fewest such pixels over the discs for a gain to be measured, and the most taken.
 constexpr int kGainMinPixels = 20;
+// How many times the pixels that follow the gains are chosen again, from the gains measured
+// on those chosen before.
+constexpr int kGainReselections = 2;
+// The fewest pixels where the gains are chosen again (disc_gains).
+constexpr int kGainReselectMinPixels = 10;
 constexpr std::size_t kGainMaxPixels = 20000;
 // A pixel follows the first gains where its ratio lies within this share of an image's gain
 // in at least kGainSteadyShare of the images (the light's own reflection and its glow pass
@@ -390,8 +427,15 @@ constexpr std::size_t kGainMaxPixels = 20000;
 constexpr double kGainFollow = 0.15;
 constexpr double kGainSteadyShare = 0.8;
 
-std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::Vector2d>& c,
-                                   const std::vector<double>& r) {
+namespace {
+
+// exposure_gains from the pixels whose median lies in [min_linear, kGainMaxLinear]; nullopt
+// where fewer than `min_pixels` follow one gain per image. `reselections`: how many times the
+// pixels that follow are chosen again.
+std::optional<std::vector<double>> gains_from(const Evidence& ev,
+                                              const std::vector<Eigen::Vector2d>& c,
+                                              const std::vector<double>& r, double min_linear,
+                                              int min_pixels, int reselections) {
   std::vector<double> gains(static_cast<std::size_t>(ev.n), 1.0);
   // The pixels, once: median in the band, inside a disc.
   std::vector<cv::Point> px;
@@ -405,13 +449,13 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
       for (int x = x0; x <= x1; ++x) {
         if ((Eigen::Vector2d(x, y) - c[k]).squaredNorm() > r[k] * r[k]) continue;
         const double m = to_linear(ev.small_median.at<float>(y, x), ev.srgb);
-        if (m < kGainMinLinear || m > kGainMaxLinear) continue;
+        if (m < min_linear || m > kGainMaxLinear) continue;
         px.emplace_back(x, y);
         m_lin.push_back(m);
       }
     }
   }
-  if (static_cast<int>(px.size()) < kGainMinPixels) return gains;
+  if (static_cast<int>(px.size()) < min_pixels) return std::nullopt;
   // A sphere filling a lit frame has hundreds of thousands: every k-th is as good a sample and
   // keeps the ratios below (one per pixel and image) small.
   if (px.size() > kGainMaxPixels) {
@@ -431,8 +475,9 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
   tbb::parallel_for(std::size_t{0}, ni, [&](std::size_t i) {
     for (std::size_t j = 0; j < np; ++j) {
       const double v = ev.at(static_cast<int>(i), px[j].x, px[j].y);
-      ratio[i * np + j] = v >= kSpotClip ? std::numeric_limits<double>::infinity()
-                                         : to_linear(v, ev.srgb) / m_lin[j];
+      ratio[i * np + j] = v >= kSpotClip
+                              ? std::numeric_limits<double>::infinity()
+                              : ev.linear_at(static_cast<int>(i), px[j].x, px[j].y) / m_lin[j];
     }
   });
   auto median_of = [](std::vector<double> v) { return upper_median(v); };
@@ -446,23 +491,42 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
                           ratio.begin() + static_cast<std::ptrdiff_t>((i + 1) * np)});
   }
   std::vector<std::size_t> steady;
-  for (std::size_t j = 0; j < np; ++j) {
-    std::size_t follow = 0;
-    for (std::size_t i = 0; i < ni; ++i) {
-      if (std::isfinite(first[i]) &&
-          std::abs(ratio[i * np + j] - first[i]) <= kGainFollow * first[i]) {
-        ++follow;
+  auto select_steady = [&](const std::vector<double>& g) {
+    steady.clear();
+    for (std::size_t j = 0; j < np; ++j) {
+      std::size_t follow = 0;
+      for (std::size_t i = 0; i < ni; ++i) {
+        if (std::isfinite(g[i]) && std::abs(ratio[i * np + j] - g[i]) <= kGainFollow * g[i]) {
+          ++follow;
+        }
+      }
+      if (static_cast<double>(follow) >= kGainSteadyShare * static_cast<double>(ni)) {
+        steady.push_back(j);
       }
     }
-    if (static_cast<double>(follow) >= kGainSteadyShare * static_cast<double>(ni)) {
-      steady.push_back(j);
+  };
+  select_steady(first);
+  // The first gains lean toward what the capture's light changes where that is most of the
+  // discs (a chrome ball in a lit room mirrors the lit cloth and cup over most of its disc):
+  // measured again on the pixels that follow them, and the pixels that follow those taken,
+  // the room's share grows (lit chrome at +-1 EV: 14 such pixels of 2217, then 52).
+  for (int it = 0; it < reselections && static_cast<int>(steady.size()) >= min_pixels; ++it) {
+    std::vector<double> again(ni, 1.0);
+    for (std::size_t i = 0; i < ni; ++i) {
+      std::vector<double> v;
+      v.reserve(steady.size());
+      for (std::size_t j : steady) v.push_back(ratio[i * np + j]);
+      again[i] = median_of(std::move(v));
     }
+    select_steady(again);
   }
-  if (static_cast<int>(steady.size()) < kGainMinPixels) return gains;
+  if (static_cast<int>(steady.size()) < min_pixels) return std::nullopt;
   // The median of their ratios, where they agree: the lower quartile within half kGainFollow
   // of it (the upper half may clip in a brighter image). Where the image's light lifts many
   // of them (a glass ball glowing whole under a light by the camera's axis: the ratios
-  // spread, or more than half clip) the image gives no measure and keeps 1.
+  // spread, or more than half clip) the image gives no measure and keeps 1. (Their lower
+  // quartile taken there instead, light only adding, was lifted itself where most were: a
+  // chrome sphere's image at 0.96 times the stack's exposure measured 1.53.)
   for (std::size_t i = 0; i < ni; ++i) {
     std::vector<double> v;
     v.reserve(steady.size());
@@ -474,6 +538,82 @@ std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::
     }
   }
   return gains;
+}
+
+}  // namespace
+
+std::vector<double> exposure_gains(const Evidence& ev, const std::vector<Eigen::Vector2d>& c,
+                                   const std::vector<double>& r) {
+  if (auto g = gains_from(ev, c, r, kGainMinLinear, kGainMinPixels, 0)) return *g;
+  return std::vector<double>(static_cast<std::size_t>(ev.n), 1.0);
+}
+
+namespace {
+
+// exposure_gains where they decide how a disc is searched: the pixels chosen again, from fewer
+// (kGainReselectMinPixels), and where too few follow, from the dim ones too.
+std::vector<double> thorough_gains(const Evidence& ev, const Eigen::Vector2d& c, double r) {
+  if (auto g =
+          gains_from(ev, {c}, {r}, kGainMinLinear, kGainReselectMinPixels, kGainReselections)) {
+    return *g;
+  }
+  std::vector<double> steady(static_cast<std::size_t>(ev.n), 1.0);
+  const std::optional<std::vector<double>> dim =
+      gains_from(ev, {c}, {r}, kGainDimMinLinear, kGainReselectMinPixels, kGainReselections);
+  if (!dim) return steady;
+  // The dim pixels vary by more than kDimExposureVaries with an exposure that varies.
+  std::vector<double> off;
+  for (double g : *dim) off.push_back(std::abs(std::log(g)));
+  return upper_median(off) > kDimExposureVaries ? *dim : steady;
+}
+
+}  // namespace
+
+cv::Mat spread_in_box(const Evidence& ev, const cv::Rect& box, const std::vector<double>& gains) {
+  cv::Mat out(box.height, box.width, CV_32F);
+  tbb::parallel_for(0, box.height, [&](int r) {
+    std::vector<double> v(static_cast<std::size_t>(ev.n));
+    for (int x = 0; x < box.width; ++x) {
+      out.at<float>(r, x) =
+          static_cast<float>(spread_without_gains(ev, box.x + x, box.y + r, gains, &v));
+    }
+  });
+  return out;
+}
+
+std::vector<double> disc_gains(const Evidence& ev, const Eigen::Vector2d& c, double r) {
+  std::vector<double> gains = thorough_gains(ev, c, r);
+  const std::vector<double> steady(gains.size(), 1.0);
+  if (!exposure_varies(gains)) return steady;
+  // The spread inside the disc, as the stack shows it and with the gains taken out, on every
+  // k-th pixel (at most about 2000).
+  const int x0 = std::max(0, static_cast<int>(std::floor(c.x() - r)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(c.y() - r)));
+  const int x1 = std::min(ev.sw - 1, static_cast<int>(std::ceil(c.x() + r)));
+  const int y1 = std::min(ev.sh - 1, static_cast<int>(std::ceil(c.y() + r)));
+  const double area = std::numbers::pi * r * r;
+  const int step = std::max(1, static_cast<int>(std::sqrt(area / 2000.0)));
+  std::vector<double> raw, taken_out, v(static_cast<std::size_t>(ev.n));
+  for (int y = y0; y <= y1; y += step) {
+    for (int x = x0; x <= x1; x += step) {
+      if ((Eigen::Vector2d(x, y) - c).squaredNorm() > r * r) continue;
+      raw.push_back(ev.small_spread.at<float>(y, x));
+      taken_out.push_back(spread_without_gains(ev, x, y, gains, &v));
+    }
+  }
+  if (raw.empty()) return steady;
+  // The stillest quarter: what the disc mirrors of the room.
+  const auto quarter = [](std::vector<double>& a) {
+    std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 4), a.end());
+    return a[a.size() / 4];
+  };
+  return quarter(taken_out) < kGainsStillerShare * quarter(raw) ? gains : steady;
+}
+
+bool exposure_varies(const std::vector<double>& gains) {
+  std::vector<double> off;
+  for (double g : gains) off.push_back(std::abs(std::log(g)));
+  return !off.empty() && upper_median(off) > kExposureVaries;
 }
 
 std::optional<double> reflection_spot_area(const std::vector<std::vector<Spot>>& spots_of) {
