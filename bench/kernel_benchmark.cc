@@ -34,14 +34,19 @@ const Band& band() {
   return b;
 }
 
+// Argument: the kernel path (0 portable, 1 AVX2, 2 AVX-512); a path this CPU lacks is skipped.
 void BM_LrgbRowU8(benchmark::State& state) {
   const Band& b = band();
+  const auto path = static_cast<ptmkit::fit::internal::KernelPath>(state.range(0));
   std::vector<float> coeffs(std::size_t{kWidth} * 6), sums(std::size_t{kWidth} * 4);
   for (auto _ : state) {
     for (int r = 0; r < kRows; ++r) {
-      ptmkit::fit::internal::lrgb_row_u8(b.pinv.data(), kImages, b.bytes.data() + r * kWidth * 3,
-                                         kImageStride, kWidth, coeffs.data(), &sums[0],
-                                         &sums[kWidth], &sums[2 * kWidth], &sums[3 * kWidth]);
+      if (!ptmkit::fit::internal::lrgb_row_u8_path(
+              path, b.pinv.data(), kImages, b.bytes.data() + r * kWidth * 3, kImageStride, kWidth,
+              coeffs.data(), &sums[0], &sums[kWidth], &sums[2 * kWidth], &sums[3 * kWidth])) {
+        state.SkipWithError("this CPU lacks the path");
+        return;
+      }
     }
     benchmark::DoNotOptimize(coeffs.data());
     benchmark::ClobberMemory();
@@ -63,7 +68,7 @@ void BM_RgbProductU8(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kRows * kWidth);
 }
 
-BENCHMARK(BM_LrgbRowU8)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_LrgbRowU8)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_RgbProductU8)->Unit(benchmark::kMicrosecond);
 
 }  // namespace

@@ -105,7 +105,7 @@ TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   std::uniform_int_distribution<int> byte(0, 255);
   for (const int n : {6, 49}) {
-    for (const int w : {1, 7, 8, 9, 10, 17, 4000}) {
+    for (const int w : {1, 7, 8, 9, 10, 15, 16, 17, 23, 24, 31, 33, 4000}) {
       const std::ptrdiff_t stride = 3 * w * 2;  // two rows per image, the first one fitted
       std::vector<float> p(static_cast<std::size_t>(6 * n));
       for (float& v : p) v = u(rng);
@@ -122,18 +122,19 @@ TEST(LrgbRowKernel, BytesGiveTheBitsOfLumaThenProduct) {
       }
       std::vector<float> coeffs(6 * nw);
       internal::apply_pinv(p.data(), n, y.data(), w, w, coeffs.data());
-      // The dispatched one-pass kernel, and its portable path.
-      for (const bool portable : {false, true}) {
+      // The dispatched one-pass kernel, and each path this CPU has.
+      for (const int path : {-1, 0, 1, 2}) {
         std::vector<float> c(6 * nw, -1.0f), s(4 * nw, -1.0f);
-        if (portable) {
-          internal::lrgb_row_u8_portable(p.data(), n, b.data(), stride, 0, w, c.data(), &s[0],
-                                         &s[nw], &s[2 * nw], &s[3 * nw]);
-        } else {
+        if (path < 0) {
           internal::lrgb_row_u8(p.data(), n, b.data(), stride, w, c.data(), &s[0], &s[nw],
                                 &s[2 * nw], &s[3 * nw]);
+        } else if (!internal::lrgb_row_u8_path(static_cast<internal::KernelPath>(path), p.data(), n,
+                                               b.data(), stride, w, c.data(), &s[0], &s[nw],
+                                               &s[2 * nw], &s[3 * nw])) {
+          continue;
         }
-        ASSERT_EQ(c, coeffs) << "n " << n << " width " << w << (portable ? " portable" : "");
-        ASSERT_EQ(s, sums) << "n " << n << " width " << w << (portable ? " portable" : "");
+        ASSERT_EQ(c, coeffs) << "n " << n << " width " << w << " path " << path;
+        ASSERT_EQ(s, sums) << "n " << n << " width " << w << " path " << path;
       }
     }
   }

@@ -55,6 +55,15 @@ void luma_ycc_row(const float* s, int w, float* yi, float* s0, float* s1, float*
 void lrgb_row_u8(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride, int w,
                  float* coeffs, float* s0, float* s1, float* s2, float* s3);
 
+// The instruction sets a kernel has a path for; every path gives the same bits.
+enum class KernelPath { kPortable, kAvx2, kAvx512 };
+
+// lrgb_row_u8 through one path (for tests and benchmarks); false, with nothing written, where
+// this CPU (or this build) lacks it. kAvx512 needs AVX-512 F, BW and VBMI.
+bool lrgb_row_u8_path(KernelPath path, const float* p, int n, const std::uint8_t* s,
+                      std::ptrdiff_t stride, int w, float* coeffs, float* s0, float* s1, float* s2,
+                      float* s3);
+
 // lrgb_row_u8's portable path alone, for texels x0 .. w - 1 (for tests: the same bits).
 void lrgb_row_u8_portable(const float* p, int n, const std::uint8_t* s, std::ptrdiff_t stride,
                           int x0, int w, float* coeffs, float* s0, float* s1, float* s2, float* s3);
