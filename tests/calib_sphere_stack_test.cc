@@ -800,8 +800,8 @@ TEST(CalibSphereStack, OneChromeBallInALitRoomIsNotTakenForItsCup) {
 // - lying on the cloth, the still disc was gone from the stack's spread, and the outline was
 //   not proposed (seed 1: a circle 3.6 px off and 3.8% small, lights 9.9 degrees off). A
 //   proposal's spread is measured again around it with the images' gains taken out.
-// Measured in memory: circles 0.10-0.13 px off and 0.46-0.51% small or large; lights 0.73-0.78
-// degrees off on average, 3.1-4.8 at worst (the most exposed images' highlights, merged with
+// Measured in memory: circles 0.10-0.13 px off and 0.46-0.51% small or large; lights 0.69-0.73
+// degrees off on average, 2.7-3.1 at worst (the most exposed images' highlights, merged with
 // the windows they clip: not met).
 TEST(CalibSphereStack, OneChromeBallUnderVaryingExposureIsNotTakenForItsCup) {
   PTMKIT_RELEASE_BUILD_ONLY();
@@ -842,6 +842,52 @@ TEST(CalibSphereStack, OneChromeBallUnderVaryingExposureIsNotTakenForItsCup) {
     EXPECT_LE(std::abs(rel), 0.01) << label;
     EXPECT_GE(found, 20) << label;
     EXPECT_LE(mean, 1.5) << label;
+  }
+}
+
+// The same ball on its cup, seeds 1 and 5: in the most exposed images the light's clipped
+// image merges with a window mirrored beside it. Cut out of the merged region, the light was
+// placed by the cut's centroid where the cut found no round edge and its halo did not settle
+// (pulled toward the window), and by the midpoint of a disc and its halo where the disc was cut
+// where the light's image is not round (4.5 px apart). The whole region's settled halo stands
+// for the first, the halo alone for the second. Measured in memory, the worst highlight from
+// its mirror highlight: seed 1 1.87 px before, 1.11 after; seed 5 2.46 before, 1.92 after
+// (another light, one whose halo does not settle: not met).
+TEST(CalibSphereStack, ALightMergedWithAMirroredWindowIsPlacedByItsHalo) {
+  PTMKIT_RELEASE_BUILD_ONLY();
+  struct Case {
+    std::uint64_t seed;
+    double worst_px;
+  };
+  for (const Case& k : {Case{1, 1.4}, Case{5, 2.2}}) {
+    const std::uint64_t seed = k.seed;
+    PhotoImages p;
+    p.options = lit_chrome_options(seed);
+    p.options.spheres.resize(1);
+    p.options.artefacts.exposure_jitter_ev = 1.0;
+    render_all(&p, "merged");
+    const StackCalibration r = calibrate_photo(p, 1);
+    const std::string label =
+        "one lit chrome ball on its cup, +-1 EV, seed " + std::to_string(seed);
+    ASSERT_EQ(r.rig.spheres.size(), 1u) << label;
+    const auto& lights = r.rig.spheres[0].lights;
+    double worst = 0.0, sum = 0.0;
+    int n = 0, worst_i = -1;
+    for (std::size_t i = 0; i < lights.size(); ++i) {
+      const auto& truth = p.truth.spheres[0].highlight_px[i];
+      if (!lights[i].found || !truth) continue;
+      const double d = (lights[i].highlight_px - *truth).norm();
+      sum += d;
+      ++n;
+      if (d > worst) {
+        worst = d;
+        worst_i = static_cast<int>(i);
+      }
+    }
+    std::printf("%s: %d highlights, mean %.3f px, worst %.3f px (light %d)\n", label.c_str(), n,
+                n > 0 ? sum / n : 0.0, worst, worst_i);
+    EXPECT_EQ(n, static_cast<int>(lights.size())) << label;
+    EXPECT_LE(worst, k.worst_px) << label;
   }
 }
 
