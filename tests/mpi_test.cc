@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <ostream>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -44,10 +45,24 @@ constexpr const char* kMpiexec = "";
 // twice (CI runs as root). In the sanitizer build, leak checking is off in the job's
 // processes: Open MPI's runtime keeps allocations in plugins it unloads at MPI_Finalize, which
 // the leak checker then cannot name or suppress. (The single-process tests check ptmkit's own
-// code for leaks.)
+// code for leaks.) Each test process gives its jobs a temporary folder of their own: Open MPI
+// keeps its session under $TMPDIR/ompi.HOST.UID, which a job ending elsewhere removes while
+// another (tests run two at a time) is creating its own in it ("A call to mkdir was unable to
+// create the desired directory").
 void mpi_environment() {
   ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
   ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  // Short (the session holds Unix sockets, whose paths are limited to about 100 bytes).
+  struct Session {
+    fs::path dir = fs::temp_directory_path() / ("ptmkit-mpi-" + std::to_string(::getpid()));
+    Session() { fs::create_directories(dir); }
+    ~Session() {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  };
+  static const Session session;
+  ::setenv("TMPDIR", session.dir.c_str(), 1);
 #ifdef PTMKIT_ASAN
   const char* asan = std::getenv("ASAN_OPTIONS");
   std::string options = asan != nullptr ? asan : "";
