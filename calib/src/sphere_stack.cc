@@ -927,11 +927,10 @@ Located locate(const Window& win, const cv::Mat& base, const std::function<bool(
     if (disc_centre) {
       // Far apart (kDiscVsHaloPx), the arc was cut where the light's image is not round
       // (lit chrome at +-1 EV: a disc 4.6 px off, its halo 0.8): the halo alone is taken.
-      const double apart = (halo - out.px).norm();
-      if (settled && apart > std::max(kDiscVsHaloPx, kDiscVsHaloCoreRadii * core_r)) {
-        out.px = halo;
-      } else if (settled) {
-        out.px = 0.5 * (out.px + halo);
+      if (settled) {
+        const bool apart =
+            (halo - out.px).norm() > std::max(kDiscVsHaloPx, kDiscVsHaloCoreRadii * core_r);
+        out.px = apart ? halo : Eigen::Vector2d(0.5 * (out.px + halo));
       }
     } else if (out.pixels <= kSmallCorePixels || (halo - out.px).norm() > kEdgeVsHaloPx) {
       out.px = halo;
